@@ -1,0 +1,29 @@
+# The two commands of the README. Both set everything up first (idempotent).
+VENV ?= .venv
+PY := $(VENV)/bin/python
+JOBS ?= 2
+
+.PHONY: demo test lint format bench setup
+
+demo:
+	@scripts/setup.sh
+	$(VENV)/bin/vlocbench demo --out out/demo
+
+test:
+	@scripts/setup.sh test
+	$(VENV)/bin/ruff check src tests benchmarks
+	$(VENV)/bin/ruff format --check src tests benchmarks
+	$(PY) -m pytest -n $(JOBS) -q
+
+lint:
+	@scripts/setup.sh test
+	$(VENV)/bin/ruff check src tests benchmarks
+
+format:
+	@scripts/setup.sh test
+	$(VENV)/bin/ruff format src tests benchmarks
+	$(VENV)/bin/ruff check --fix src tests benchmarks
+
+bench:
+	@scripts/setup.sh
+	for b in benchmarks/bench_*.py; do $(PY) $$b; done

@@ -1,0 +1,60 @@
+"""Simulator performance: render time, vehicle step + collision query, town scene build.
+
+Prints medians of several runs after a warm-up. Targets (issue 2, this 2-core CPU): 800x600 render
+<= 60 ms, vehicle step + collision <= 1 ms, town scene build <= 5 s.
+"""
+
+from __future__ import annotations
+
+import statistics
+import time
+
+import numpy as np
+
+from vlocbench.sim import Conditions, Control, Illumination, Simulator, Weather, gallery_camera
+from vlocbench.sim.scene import build_scene
+from vlocbench.sim.town import generate_town, load_town_spec
+
+
+def timed(fn, repeat: int) -> float:
+    fn()  # warm-up
+    times = []
+    for _ in range(repeat):
+        t = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t)
+    return statistics.median(times)
+
+
+def main() -> None:
+    for name in ("town01", "town10"):
+        spec = load_town_spec(name)
+        build_s = timed(lambda: build_scene(generate_town(spec)), 3)  # noqa: B023
+        town = generate_town(spec)
+        sim = Simulator(town)
+        step_ms = 1000 * timed(lambda: sim.step(Control(throttle=0.2)), 2000)  # noqa: B023
+        cam = gallery_camera()
+        waypoints = np.linspace(5, len(town.route.waypoints_xy) - 5, 20).astype(int)
+        print(
+            f"{name}: scene build (generate + compile) {build_s:.2f} s; step + collision {step_ms:.3f} ms"
+        )
+        for label, cond in (
+            ("day", Conditions()),
+            ("night k=8", Conditions(illumination=Illumination(k=8))),
+            ("fog 30 m", Conditions(weather=Weather(fog_visual_range_m=30))),
+            ("rain", Conditions(weather=Weather(rain=0.7))),
+        ):
+            sim.set_conditions(cond)
+            frames = []
+            for idx in waypoints:
+                x, y = town.route.waypoints_xy[idx]
+                sim.teleport(float(x), float(y), float(town.route.yaw_rad[idx]))
+                frames.append(1000 * timed(lambda: sim.render([cam]), 3))  # noqa: B023
+            print(
+                f"  render 800x600 {label:10s}: median {statistics.median(frames):5.1f} ms (20 places x 3)"
+            )
+        sim.close()
+
+
+if __name__ == "__main__":
+    main()

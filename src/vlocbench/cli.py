@@ -1,0 +1,146 @@
+"""The ``vlocbench`` command line. The only place that turns errors into messages and exit codes."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+from vlocbench import __version__
+from vlocbench.errors import VlocbenchError
+
+EXIT_USAGE = 2
+
+
+def _towns(args: argparse.Namespace) -> int:
+    from vlocbench.sim.town import builtin_town_names, generate_town, load_town_spec
+
+    for name in builtin_town_names():
+        town = generate_town(load_town_spec(name))
+        print(
+            f"{name}: {town.spec.style}, {len(town.buildings)} buildings, route "
+            f"{town.route.length_m:.0f} m with {town.route.num_turns} turns"
+        )
+    return 0
+
+
+def _map(args: argparse.Namespace) -> int:
+    from vlocbench.sim.birdseye import save_town_map
+    from vlocbench.sim.town import generate_town, load_town_spec
+
+    town = generate_town(load_town_spec(args.town))
+    out = args.output or Path(f"{town.name}.png")
+    save_town_map(town, out, route=not args.no_route)
+    print(f"wrote {out}")
+    return 0
+
+
+def _render(args: argparse.Namespace) -> int:
+    import cv2
+
+    from vlocbench.sim import (
+        Camera,
+        Conditions,
+        Extrinsics,
+        Headlights,
+        Illumination,
+        Intrinsics,
+        Simulator,
+        Viewpoint,
+        Weather,
+    )
+    from vlocbench.sim.town import generate_town, load_town_spec
+
+    town = generate_town(load_town_spec(args.town))
+    conditions = Conditions(
+        illumination=Illumination(k=args.k),
+        weather=Weather(fog_visual_range_m=args.fog, rain=args.rain, overcast=args.overcast),
+        season=args.season,
+        viewpoint=Viewpoint(args.dz, args.pitch_down),
+        headlights=Headlights(on=args.headlights),
+    )
+    camera = Camera(
+        "cli", Intrinsics(args.width, args.height, args.fov), Extrinsics(yaw_deg=args.yaw)
+    )
+    n = len(town.route.waypoints_xy)
+    if not 0 <= args.waypoint < n:
+        raise VlocbenchError(f"--waypoint: must be in [0, {n - 1}] for {town.name}'s route")
+    sim = Simulator(town, conditions)
+    x, y = town.route.waypoints_xy[args.waypoint]
+    sim.teleport(float(x), float(y), float(town.route.yaw_rad[args.waypoint]))
+    frame = sim.render([camera])[0]
+    cv2.imwrite(str(args.output), frame.image[:, :, ::-1])
+    sim.close()
+    print(f"wrote {args.output}")
+    return 0
+
+
+def _tour(args: argparse.Namespace) -> int:
+    from vlocbench.sim.tour import run_tour
+
+    index = run_tour(args.out, towns=args.towns, stops=args.stops)
+    print(f"report: {index.resolve()}")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="vlocbench",
+        description="Benchmark visual localization in closed-loop navigation on procedural "
+        "MuJoCo-rendered towns.",
+    )
+    parser.add_argument("--version", action="version", version=f"vlocbench {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    p = sub.add_parser("towns", help="list the built-in towns and their routes")
+    p.set_defaults(func=_towns)
+
+    p = sub.add_parser("map", help="write a bird's-eye map of a town and its route (PNG)")
+    p.add_argument("town", help="built-in town name (see `vlocbench towns`) or a town spec YAML")
+    p.add_argument("-o", "--output", type=Path, help="PNG path (default: TOWN.png)")
+    p.add_argument("--no-route", action="store_true", help="draw the town without its route")
+    p.set_defaults(func=_map)
+
+    p = sub.add_parser("render", help="render one camera image at a route waypoint")
+    p.add_argument("town", help="built-in town name or a town spec YAML")
+    p.add_argument("-o", "--output", type=Path, default=Path("render.png"), help="image path")
+    p.add_argument("--waypoint", type=int, default=0, help="route waypoint index (2 m apart)")
+    p.add_argument("--k", type=float, default=0.0, help="illumination level k (0 = noon)")
+    p.add_argument("--fog", type=float, default=None, help="fog visual range in metres")
+    p.add_argument("--rain", type=float, default=0.0, help="rain strength in [0, 1]")
+    p.add_argument("--overcast", type=float, default=0.0, help="overcast in [0, 1]")
+    p.add_argument("--season", default="summer", help="summer, autumn or winter")
+    p.add_argument("--headlights", action="store_true", help="switch the headlights on")
+    p.add_argument("--dz", type=float, default=0.0, help="camera height offset in metres")
+    p.add_argument("--pitch-down", type=float, default=0.0, help="camera tilt down in degrees")
+    p.add_argument("--yaw", type=float, default=-90.0, help="camera yaw in degrees (-90: right)")
+    p.add_argument("--width", type=int, default=800)
+    p.add_argument("--height", type=int, default=600)
+    p.add_argument("--fov", type=float, default=90.0, help="horizontal field of view in degrees")
+    p.set_defaults(func=_render)
+
+    for name, help_text, default_out in (
+        ("tour", "render towns under every condition and write an HTML report", "out/tour"),
+        ("demo", "the README's main job: currently the town tour report", "out/demo"),
+    ):
+        p = sub.add_parser(name, help=help_text)
+        p.add_argument("--out", type=Path, default=Path(default_out), help="output folder")
+        p.add_argument("--towns", nargs="+", default=["town01", "town10"], help="towns to tour")
+        p.add_argument("--stops", type=int, default=3, help="places along each route")
+        p.set_defaults(func=_tour)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args))
+    except VlocbenchError as exc:
+        print(f"vlocbench: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,35 @@
+"""The project's exception hierarchy. The CLI is the only place that turns these into exit codes."""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+
+
+class VlocbenchError(Exception):
+    """Base class of every error raised on purpose by vlocbench."""
+
+
+class ConfigError(VlocbenchError, ValueError):
+    """A configuration value is invalid; the message names the field and the reason."""
+
+    def __init__(self, field: str, reason: str) -> None:
+        self.field = field
+        self.reason = reason
+        super().__init__(f"{field}: {reason}")
+
+
+class UnknownNameError(ConfigError, KeyError):
+    """A name (town, method, season, ...) is not one of the valid choices; the message lists them."""
+
+    def __init__(self, kind: str, name: str, valid: Iterable[str]) -> None:
+        self.kind = kind
+        self.name = name
+        self.valid = sorted(valid)
+        super().__init__(kind, f"unknown {kind} {name!r}; valid: {', '.join(self.valid)}")
+
+    def __str__(self) -> str:  # KeyError would otherwise quote the message
+        return self.args[0]
+
+
+class RenderBackendError(VlocbenchError, RuntimeError):
+    """The headless OpenGL backend cannot start (missing libraries, bad MUJOCO_GL)."""

@@ -1,0 +1,70 @@
+"""Rigid-body helpers shared by every stage (pure numpy).
+
+Conventions: world frame right-handed, z up, metres. Poses are 4x4 homogeneous matrices named
+``a_from_b`` (maps points in frame b to frame a). Camera frames follow OpenCV (x right, y down,
+z forward). Vehicle frame: x forward, y left, z up, origin at the car's centre on the ground.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+Array = NDArray[np.float64]
+
+# optical (x right, y down, z forward) from body-style (x forward, y left, z up)
+BODY_FROM_OPTICAL: Array = np.array(
+    [[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]], dtype=np.float64
+)
+
+
+def rot_x(angle_rad: float) -> Array:
+    c, s = np.cos(angle_rad), np.sin(angle_rad)
+    return np.array([[1, 0, 0], [0, c, -s], [0, s, c]], dtype=np.float64)
+
+
+def rot_y(angle_rad: float) -> Array:
+    c, s = np.cos(angle_rad), np.sin(angle_rad)
+    return np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]], dtype=np.float64)
+
+
+def rot_z(angle_rad: float) -> Array:
+    c, s = np.cos(angle_rad), np.sin(angle_rad)
+    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]], dtype=np.float64)
+
+
+def rpy_to_matrix(roll_rad: float, pitch_rad: float, yaw_rad: float) -> Array:
+    """R = Rz(yaw) @ Ry(pitch) @ Rx(roll) (intrinsic z-y-x). With z up, positive pitch tilts x down."""
+    return rot_z(yaw_rad) @ rot_y(pitch_rad) @ rot_x(roll_rad)
+
+
+def make_pose(rotation: Array, translation: Array) -> Array:
+    """4x4 pose from a 3x3 rotation and a 3-vector translation."""
+    pose = np.eye(4)
+    pose[:3, :3] = rotation
+    pose[:3, 3] = translation
+    return pose
+
+
+def planar_pose(x_m: float, y_m: float, yaw_rad: float, z_m: float = 0.0) -> Array:
+    """world_from_body for a body on the ground plane at (x, y) heading ``yaw_rad``."""
+    return make_pose(rot_z(yaw_rad), np.array([x_m, y_m, z_m]))
+
+
+def invert_pose(a_from_b: Array) -> Array:
+    """b_from_a for a rigid a_from_b."""
+    rot = a_from_b[:3, :3]
+    out = np.eye(4)
+    out[:3, :3] = rot.T
+    out[:3, 3] = -rot.T @ a_from_b[:3, 3]
+    return out
+
+
+def transform_points(a_from_b: Array, points_b: Array) -> Array:
+    """Map (N, 3) points from frame b to frame a."""
+    return points_b @ a_from_b[:3, :3].T + a_from_b[:3, 3]
+
+
+def wrap_angle(angle_rad: float | Array) -> float | Array:
+    """Wrap to [-pi, pi)."""
+    return (np.asarray(angle_rad) + np.pi) % (2 * np.pi) - np.pi

@@ -1,0 +1,136 @@
+"""The conditions the benchmark varies between the gallery drive and the test drive.
+
+All ten factors of the paper's Table 1 are parameters here: illumination, weather, viewpoint,
+scene structure (the town), season, camera extrinsics / intrinsics / several cameras (see
+``camera.py``), dynamic objects and headlights.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+
+from vlocbench.config import require
+from vlocbench.errors import UnknownNameError
+
+Season = Literal["summer", "autumn", "winter"]
+SEASONS: tuple[str, ...] = ("summer", "autumn", "winter")
+
+
+@dataclass(frozen=True)
+class Illumination:
+    """Paper's scheme: V_k = V_base * 0.5**k for sun intensity and sun elevation; k = 0 is noon."""
+
+    k: float = 0.0
+    sun_intensity_base: float = 1.0
+    sun_elevation_base_rad: float = 0.4 * np.pi
+    sun_azimuth_deg: float = 135.0
+
+    def __post_init__(self) -> None:
+        require(self.k >= 0, "illumination.k", f"must be >= 0, got {self.k:g}")
+        require(self.sun_intensity_base > 0, "illumination.sun_intensity_base", "must be > 0")
+        require(
+            0 < self.sun_elevation_base_rad <= np.pi / 2,
+            "illumination.sun_elevation_base_rad",
+            "must be in (0, pi/2]",
+        )
+
+    @property
+    def sun_intensity(self) -> float:
+        return self.sun_intensity_base * 0.5**self.k
+
+    @property
+    def sun_elevation_rad(self) -> float:
+        return self.sun_elevation_base_rad * 0.5**self.k
+
+
+@dataclass(frozen=True)
+class Weather:
+    """Fog by visual range (5 % contrast left at that distance), rain and overcast in [0, 1]."""
+
+    fog_visual_range_m: float | None = None
+    rain: float = 0.0
+    overcast: float = 0.0
+    wetness: float | None = None  # wet look of the ground; defaults to ``rain``
+
+    def __post_init__(self) -> None:
+        if self.fog_visual_range_m is not None:
+            require(
+                self.fog_visual_range_m > 0,
+                "weather.fog_visual_range_m",
+                f"must be > 0 m (or null for no fog), got {self.fog_visual_range_m:g}",
+            )
+        for name in ("rain", "overcast"):
+            v = getattr(self, name)
+            require(0 <= v <= 1, f"weather.{name}", f"must be in [0, 1], got {v:g}")
+        if self.wetness is not None:
+            require(0 <= self.wetness <= 1, "weather.wetness", "must be in [0, 1]")
+
+    @property
+    def fog_density_per_m(self) -> float:
+        """Exponential fog density: exp(-d * v) = 0.05 at the visual range v."""
+        return 0.0 if self.fog_visual_range_m is None else 3.0 / self.fog_visual_range_m
+
+    @property
+    def ground_wetness(self) -> float:
+        return self.rain if self.wetness is None else self.wetness
+
+
+@dataclass(frozen=True)
+class Viewpoint:
+    """Query camera raised by ``dz_m`` and tilted down by ``pitch_down_deg`` (paper's table)."""
+
+    dz_m: float = 0.0
+    pitch_down_deg: float = 0.0
+
+    def __post_init__(self) -> None:
+        require(-1.5 < self.dz_m <= 30, "viewpoint.dz_m", "must be in (-1.5, 30] m")
+        require(
+            -60 <= self.pitch_down_deg <= 80, "viewpoint.pitch_down_deg", "must be in [-60, 80]"
+        )
+
+
+@dataclass(frozen=True)
+class Traffic:
+    """Other cars on the lanes and pedestrians on the sidewalks, moved by a seeded model."""
+
+    cars: int = 0
+    pedestrians: int = 0
+    seed: int = 0
+    car_speed_mps: float = 6.0
+    pedestrian_speed_mps: float = 1.3
+
+    def __post_init__(self) -> None:
+        require(0 <= self.cars <= 200, "traffic.cars", "must be in [0, 200]")
+        require(0 <= self.pedestrians <= 400, "traffic.pedestrians", "must be in [0, 400]")
+        require(0 < self.car_speed_mps <= 20, "traffic.car_speed_mps", "must be in (0, 20]")
+        require(
+            0 < self.pedestrian_speed_mps <= 3, "traffic.pedestrian_speed_mps", "must be in (0, 3]"
+        )
+
+
+@dataclass(frozen=True)
+class Headlights:
+    on: bool = False
+    intensity: float = 1.0
+    cutoff_deg: float = 50.0
+
+    def __post_init__(self) -> None:
+        require(self.intensity >= 0, "headlights.intensity", "must be >= 0")
+        require(0 < self.cutoff_deg <= 90, "headlights.cutoff_deg", "must be in (0, 90]")
+
+
+@dataclass(frozen=True)
+class Conditions:
+    illumination: Illumination = field(default_factory=Illumination)
+    weather: Weather = field(default_factory=Weather)
+    season: Season = "summer"
+    viewpoint: Viewpoint = field(default_factory=Viewpoint)
+    traffic: Traffic = field(default_factory=Traffic)
+    headlights: Headlights = field(default_factory=Headlights)
+
+    def __post_init__(self) -> None:
+        if self.season not in SEASONS:
+            raise UnknownNameError("season", str(self.season), SEASONS)

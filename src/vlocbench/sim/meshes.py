@@ -1,0 +1,238 @@
+"""Triangle-mesh construction for the town (pure numpy).
+
+Lighting in MuJoCo's renderer is per vertex, so surfaces that headlights must light are
+subdivided into cells of about ``cell_m`` (2 m). Every face gets its own vertices so that normals and
+texture coordinates stay sharp at edges.
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+Array = NDArray[np.float64]
+
+
+@dataclass
+class MeshBuilder:
+    """Accumulates triangles: vertices (N, 3), texture coordinates (N, 2), faces (M, 3)."""
+
+    vertices: list[Array] = field(default_factory=list)
+    uvs: list[Array] = field(default_factory=list)
+    faces: list[NDArray[np.int64]] = field(default_factory=list)
+    count: int = 0
+
+    def add(self, vertices: Array, uvs: Array, faces: NDArray[np.int64]) -> None:
+        self.vertices.append(vertices)
+        self.uvs.append(uvs)
+        self.faces.append(faces + self.count)
+        self.count += len(vertices)
+
+    def arrays(self) -> tuple[Array, Array, NDArray[np.int64]]:
+        return (
+            np.concatenate(self.vertices),
+            np.concatenate(self.uvs),
+            np.concatenate(self.faces),
+        )
+
+    def __bool__(self) -> bool:
+        return self.count > 0
+
+    def quad(
+        self,
+        origin: Array,
+        u_axis: Array,
+        v_axis: Array,
+        size_u: float,
+        size_v: float,
+        uv_origin: tuple[float, float] = (0.0, 0.0),
+        uv_per_m: tuple[float, float] = (1.0, 1.0),
+        cell_m: float = 0.0,
+    ) -> None:
+        """A rectangle ``origin + a*u_axis + b*v_axis``, a in [0, size_u], b in [0, size_v].
+
+        Its front (counter-clockwise) side faces ``u_axis x v_axis``. Texture coordinates grow by
+        ``uv_per_m`` per metre from ``uv_origin``; ``cell_m`` > 0 subdivides into cells.
+        """
+        nu = max(1, int(np.ceil(size_u / cell_m))) if cell_m > 0 else 1
+        nv = max(1, int(np.ceil(size_v / cell_m))) if cell_m > 0 else 1
+        a = np.linspace(0.0, size_u, nu + 1)
+        b = np.linspace(0.0, size_v, nv + 1)
+        aa, bb = np.meshgrid(a, b, indexing="xy")  # (nv+1, nu+1)
+        verts = origin + aa.reshape(-1, 1) * u_axis + bb.reshape(-1, 1) * v_axis
+        uv = np.stack(
+            [uv_origin[0] + aa.ravel() * uv_per_m[0], uv_origin[1] + bb.ravel() * uv_per_m[1]], 1
+        )
+        idx = np.arange((nv + 1) * (nu + 1)).reshape(nv + 1, nu + 1)
+        p00, p10 = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel()
+        p01, p11 = idx[1:, :-1].ravel(), idx[1:, 1:].ravel()
+        faces = np.concatenate([np.stack([p00, p10, p11], 1), np.stack([p00, p11, p01], 1)])
+        self.add(verts, uv, faces)
+
+    def box(self, center: Array, half: Array, yaw_rad: float = 0.0, uv_per_m: float = 0.5) -> None:
+        """A closed box (all six faces), rotated by ``yaw_rad`` about z."""
+        c, s = np.cos(yaw_rad), np.sin(yaw_rad)
+        ex, ey, ez = np.array([c, s, 0.0]), np.array([-s, c, 0.0]), np.array([0.0, 0.0, 1.0])
+        hx, hy, hz = half
+        corner = center - hx * ex - hy * ey - hz * ez
+        k = (uv_per_m, uv_per_m)
+        self.quad(corner, ex, ez, 2 * hx, 2 * hz, uv_per_m=k)  # -y face
+        self.quad(corner + 2 * hy * ey + 2 * hx * ex, -ex, ez, 2 * hx, 2 * hz, uv_per_m=k)
+        self.quad(corner + 2 * hy * ey, -ey, ez, 2 * hy, 2 * hz, uv_per_m=k)  # -x face
+        self.quad(corner + 2 * hx * ex, ey, ez, 2 * hy, 2 * hz, uv_per_m=k)
+        self.quad(corner + 2 * hz * ez, ex, ey, 2 * hx, 2 * hy, uv_per_m=k)  # top
+        self.quad(corner + 2 * hy * ey, ex, -ey, 2 * hx, 2 * hy, uv_per_m=k)  # bottom
+
+    def cylinder(
+        self,
+        base: Array,
+        radius: float,
+        height: float,
+        sides: int = 8,
+        top_radius: float | None = None,
+    ) -> None:
+        """An open-ended vertical (truncated) cone/cylinder standing on ``base``."""
+        top_radius = radius if top_radius is None else top_radius
+        a = np.linspace(0.0, 2 * np.pi, sides + 1)
+        ring = np.stack([np.cos(a), np.sin(a), np.zeros_like(a)], 1)
+        bottom = base + radius * ring
+        top = base + top_radius * ring + np.array([0.0, 0.0, height])
+        verts = np.concatenate([bottom, top])
+        uv = np.stack([np.tile(a / np.pi, 2), np.repeat([0.0, height], sides + 1)], 1)
+        i = np.arange(sides)
+        n = sides + 1
+        faces = np.concatenate(
+            [np.stack([i, i + 1, i + n + 1], 1), np.stack([i, i + n + 1, i + n], 1)]
+        )
+        self.add(verts, uv, faces)
+
+    def blob(self, center: Array, radii: Array, rng: np.random.Generator, subdiv: int = 1) -> None:
+        """A lumpy ellipsoid (icosphere with radial noise), e.g. a tree crown."""
+        verts, faces = icosphere(subdiv)
+        verts = verts * (1 + rng.uniform(-0.12, 0.12, (len(verts), 1)))
+        uv = np.stack([np.arctan2(verts[:, 1], verts[:, 0]), verts[:, 2]], 1) * 1.5
+        self.add(center + verts * radii, uv, faces)
+
+
+def icosphere(subdiv: int) -> tuple[Array, NDArray[np.int64]]:
+    """Unit icosphere: vertices (N, 3), outward counter-clockwise faces (M, 3)."""
+    t = (1 + 5**0.5) / 2
+    verts = [
+        [-1, t, 0], [1, t, 0], [-1, -t, 0], [1, -t, 0], [0, -1, t], [0, 1, t], [0, -1, -t],
+        [0, 1, -t], [t, 0, -1], [t, 0, 1], [-t, 0, -1], [-t, 0, 1],
+    ]  # fmt: skip
+    faces = [
+        [0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9], [5, 11, 4],
+        [11, 10, 2], [10, 7, 6], [7, 1, 8], [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8], [3, 8, 9],
+        [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1],
+    ]  # fmt: skip
+    v = [np.array(p, dtype=np.float64) / np.linalg.norm(p) for p in verts]
+    f = faces
+    for _ in range(subdiv):
+        cache: dict[tuple[int, int], int] = {}
+
+        def mid(a: int, b: int, cache: dict[tuple[int, int], int] = cache) -> int:
+            key = (min(a, b), max(a, b))
+            if key not in cache:
+                m = v[a] + v[b]
+                v.append(m / np.linalg.norm(m))
+                cache[key] = len(v) - 1
+            return cache[key]
+
+        new = []
+        for a, b, c in f:
+            ab, bc, ca = mid(a, b), mid(b, c), mid(c, a)
+            new += [[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]
+        f = new
+    return np.array(v), np.array(f, dtype=np.int64)
+
+
+def rounded_rect_outline(
+    rect: tuple[float, float, float, float], radius: float, step_m: float = 1.0
+) -> Array:
+    """Counter-clockwise outline (N, 2) of a rectangle with rounded corners (not closed)."""
+    x0, y0, x1, y1 = rect
+    if radius <= 0:
+        return np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]], dtype=np.float64)
+    n = max(3, int(np.ceil(0.5 * np.pi * radius / step_m)))
+    pts = []
+    for cx, cy, a0 in (
+        (x1 - radius, y0 + radius, -np.pi / 2),
+        (x1 - radius, y1 - radius, 0.0),
+        (x0 + radius, y1 - radius, np.pi / 2),
+        (x0 + radius, y0 + radius, np.pi),
+    ):
+        a = a0 + np.linspace(0, np.pi / 2, n + 1)
+        pts.append(np.stack([cx + radius * np.cos(a), cy + radius * np.sin(a)], 1))
+    return np.concatenate(pts)
+
+
+def platform_mesh(
+    top: MeshBuilder,
+    side: MeshBuilder,
+    rect: tuple[float, float, float, float],
+    radius: float,
+    height: float,
+    cell_m: float,
+    tile_m: float,
+) -> None:
+    """A raised slab: its top (subdivided, rounded corners as fans) and its curb faces."""
+    x0, y0, x1, y1 = rect
+    z = np.array([0.0, 0.0, height])
+    ex, ey = np.array([1.0, 0, 0]), np.array([0, 1.0, 0])
+    uvk = (1 / tile_m, 1 / tile_m)
+    r = radius
+    # cross-shaped body of the top: centre column plus the two side columns
+    top.quad(
+        np.array([x0 + r, y0, 0]) + z,
+        ex,
+        ey,
+        x1 - x0 - 2 * r,
+        y1 - y0,
+        ((x0 + r) / tile_m, y0 / tile_m),
+        uvk,
+        cell_m,
+    )
+    if r > 0:
+        for xa in (x0, x1 - r):
+            top.quad(
+                np.array([xa, y0 + r, 0]) + z,
+                ex,
+                ey,
+                r,
+                y1 - y0 - 2 * r,
+                (xa / tile_m, (y0 + r) / tile_m),
+                uvk,
+                cell_m,
+            )
+        n = max(3, int(np.ceil(0.5 * np.pi * r / 1.0)))
+        for cx, cy, a0 in (
+            (x1 - r, y0 + r, -np.pi / 2),
+            (x1 - r, y1 - r, 0.0),
+            (x0 + r, y1 - r, np.pi / 2),
+            (x0 + r, y0 + r, np.pi),
+        ):
+            a = a0 + np.linspace(0, np.pi / 2, n + 1)
+            ring = np.stack([cx + r * np.cos(a), cy + r * np.sin(a), np.full_like(a, height)], 1)
+            verts = np.concatenate([[[cx, cy, height]], ring])
+            faces = np.stack([np.zeros(n, np.int64), np.arange(1, n + 1), np.arange(2, n + 2)], 1)
+            top.add(verts, verts[:, :2] / tile_m, faces)
+    outline = rounded_rect_outline(rect, r)
+    closed = np.concatenate([outline, outline[:1]])
+    for a, b in itertools.pairwise(closed):
+        d = b - a
+        length = float(np.linalg.norm(d))
+        if length < 1e-6:
+            continue
+        u = np.array([d[0], d[1], 0.0]) / length
+        side.quad(
+            np.array([a[0], a[1], 0.0]),
+            u,
+            np.array([0, 0, 1.0]),
+            length,
+            height,
+            uv_per_m=(1.0, 1.0),
+        )

@@ -1,0 +1,226 @@
+"""Headless rendering of a town scene under given conditions (MuJoCo's classic renderer).
+
+Conditions change model parameters in place (lights, materials, sky texture, geom groups) and GL
+fog state; nothing is recompiled. Cameras are set directly in the MuJoCo scene (position, axes,
+frustum from the intrinsics), so rendered images agree with ``Camera.world_from_cam`` and
+``Intrinsics.K`` to sub-pixel precision.
+"""
+
+from __future__ import annotations
+
+import zlib
+
+import mujoco
+import numpy as np
+from numpy.typing import NDArray
+
+from vlocbench.sim import textures as tex
+from vlocbench.sim.backend import missing_libraries_error, select_backend
+from vlocbench.sim.conditions import Conditions
+from vlocbench.sim.rain import apply_rain
+from vlocbench.sim.scene import (
+    GROUP_COLLISION,
+    GROUP_EGO,
+    GROUP_FOLIAGE_FULL,
+    GROUP_FOLIAGE_SPARSE,
+    SKY_SIZE,
+    TownScene,
+)
+
+Image = NDArray[np.uint8]
+NEAR_M, FAR_M = 0.1, 2000.0
+LEAVES = {"summer": (0.33, 0.55, 0.22), "autumn": (0.85, 0.45, 0.12), "winter": (0.5, 0.5, 0.5)}
+
+
+def sky_colors(c: Conditions) -> tuple[NDArray, NDArray, float]:
+    """Zenith and horizon colours (RGB in [0, 1]) and the sky brightness."""
+    ill, w = c.illumination, c.weather
+    brightness = float(np.clip(ill.sun_intensity, 0, 1) ** 0.45)
+    dusk = float(np.clip(1 - ill.sun_elevation_rad / np.radians(15), 0, 1))  # low sun: warm horizon
+    zenith = (
+        np.array([0.30, 0.50, 0.85]) * (1 - 0.3 * dusk) + np.array([0.2, 0.2, 0.4]) * 0.3 * dusk
+    )
+    horizon = np.array([0.75, 0.82, 0.92]) * (1 - dusk) + np.array([0.95, 0.62, 0.38]) * dusk
+    grey = np.array([0.62, 0.64, 0.67])
+    zenith = zenith * (1 - w.overcast) + grey * w.overcast
+    horizon = horizon * (1 - w.overcast) + grey * 1.05 * w.overcast
+    if w.fog_visual_range_m is not None:
+        fog = fog_color(c)
+        mix = float(np.clip(60.0 / w.fog_visual_range_m, 0.5, 1.0))
+        return zenith * brightness * (1 - mix) + fog * mix, fog, brightness
+    return zenith * brightness, horizon * brightness, brightness
+
+
+def fog_color(c: Conditions) -> NDArray:
+    brightness = float(np.clip(c.illumination.sun_intensity, 0, 1) ** 0.45)
+    return np.array([0.72, 0.74, 0.76]) * brightness * (1 - 0.2 * c.weather.rain)
+
+
+class Renderer:
+    """Renders RGB images of ``scene`` from arbitrary camera poses under ``apply``-ed conditions."""
+
+    def __init__(self, scene: TownScene, shadows: bool = False) -> None:
+        self.scene = scene
+        self.shadows = shadows
+        self.backend = select_backend()
+        self._renderers: dict[tuple[int, int], mujoco.Renderer] = {}
+        self.conditions = Conditions()
+        self.option = mujoco.MjvOption()
+        self.apply(Conditions())
+
+    # -- conditions -----------------------------------------------------------------------------
+    def apply(self, conditions: Conditions) -> None:
+        """Set lights, sky, materials and foliage for ``conditions`` (no recompilation)."""
+        self.conditions = conditions
+        m, sc = self.scene.model, self.scene
+        ill, w = conditions.illumination, conditions.weather
+        intensity, elevation = ill.sun_intensity, ill.sun_elevation_rad
+        az = np.radians(ill.sun_azimuth_deg)
+        # light travels from the sun towards the ground
+        m.light_dir[sc.sun_light_id] = -np.array(
+            [np.cos(elevation) * np.cos(az), np.cos(elevation) * np.sin(az), np.sin(elevation)]
+        )
+        dusk = float(np.clip(1 - elevation / np.radians(15), 0, 1))
+        sun_color = np.array([1.0, 0.97, 0.92]) * (1 - dusk) + np.array([1.0, 0.7, 0.45]) * dusk
+        direct = 0.7 * intensity * (1 - 0.75 * w.overcast)
+        ambient = 0.35 * intensity**0.4 * (1 + 0.25 * w.overcast)
+        m.light_diffuse[sc.sun_light_id] = sun_color * direct
+        m.light_ambient[sc.sun_light_id] = np.array([0.92, 0.95, 1.0]) * ambient
+        m.light_specular[sc.sun_light_id] = 0.2 * direct
+        h = conditions.headlights
+        for lid in sc.headlight_ids:
+            m.light_active[lid] = h.on
+            m.light_diffuse[lid] = np.array([1.0, 0.97, 0.88]) * h.intensity
+            m.light_cutoff[lid] = h.cutoff_deg
+        self._apply_season(conditions)
+        wet = w.ground_wetness
+        for name in ("road", "intersection", "paving", "crosswalk"):
+            for variant in ("", "_autumn", "_winter"):
+                mid = sc.material_ids.get(name + variant)
+                if mid is None:
+                    continue
+                base = sc.base_rgba[name + variant]
+                m.mat_rgba[mid, :3] = base[:3] * (1 - 0.35 * wet)
+                m.mat_specular[mid] = 0.05 + 0.6 * wet
+                m.mat_shininess[mid] = 0.1 + 0.7 * wet
+        zenith, horizon, _ = sky_colors(conditions)
+        image = tex.sky(tuple(zenith), tuple(horizon), SKY_SIZE)
+        start = m.tex_adr[sc.sky_texture_id]
+        m.tex_data[start : start + image.size] = image.ravel()
+        for r in self._renderers.values():
+            self._upload_sky(r)
+
+    def _apply_season(self, c: Conditions) -> None:
+        m, sc = self.scene.model, self.scene
+        suffix = {"summer": "", "autumn": "_autumn", "winter": "_winter"}[c.season]
+        for family, geoms in sc.season_geoms.items():
+            name = family + suffix if family + suffix in sc.material_ids else family
+            if family == "roof" and c.season == "autumn":
+                name = "roof"
+            for g in geoms:
+                m.geom_matid[g] = sc.material_ids[name]
+        for mat in ("leaves_full", "leaves_sparse"):
+            m.mat_rgba[sc.material_ids[mat], :3] = LEAVES[c.season]
+        groups = np.ones(6, np.uint8)
+        groups[GROUP_COLLISION] = groups[GROUP_EGO] = 0
+        groups[GROUP_FOLIAGE_FULL] = c.season == "summer"
+        groups[GROUP_FOLIAGE_SPARSE] = c.season == "autumn"
+        self.option.geomgroup[:] = groups
+
+    def _upload_sky(self, r: mujoco.Renderer) -> None:
+        r._gl_context.make_current()
+        mujoco.mjr_uploadTexture(self.scene.model, r._mjr_context, self.scene.sky_texture_id)
+
+    # -- rendering ------------------------------------------------------------------------------
+    def _renderer(self, width: int, height: int) -> mujoco.Renderer:
+        key = (width, height)
+        if key not in self._renderers:
+            try:
+                r = mujoco.Renderer(self.scene.model, height, width, max_geom=20000)
+            except Exception as exc:  # MuJoCo raises plain errors for missing GL libraries
+                raise missing_libraries_error(self.backend, exc) from exc
+            r.scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = self.shadows
+            r.scene.flags[mujoco.mjtRndFlag.mjRND_SKYBOX] = 1
+            self._renderers[key] = r
+            self._upload_sky(r)
+        return self._renderers[key]
+
+    def _set_fog(self, r: mujoco.Renderer) -> None:
+        from OpenGL import GL
+
+        w = self.conditions.weather
+        r.scene.flags[mujoco.mjtRndFlag.mjRND_FOG] = w.fog_visual_range_m is not None
+        if w.fog_visual_range_m is None:
+            return
+        # MuJoCo reads its (linear) fog settings only when the context is made; set GL state.
+        # Under fog it draws no skybox but clears to the context's fog colour: set that too.
+        r._mjr_context.fogRGBA[:] = [*fog_color(self.conditions), 1.0]
+        r._gl_context.make_current()
+        GL.glFogi(GL.GL_FOG_MODE, GL.GL_EXP)
+        GL.glFogf(GL.GL_FOG_DENSITY, w.fog_density_per_m)
+        GL.glFogfv(GL.GL_FOG_COLOR, [*fog_color(self.conditions), 1.0])
+
+    def render(
+        self,
+        world_from_cam: NDArray[np.float64],
+        width: int,
+        height: int,
+        fov_deg: float,
+        frame_id: int = 0,
+        markers_world: NDArray[np.float64] | None = None,
+        marker_radius_m: float = 0.1,
+    ) -> Image:
+        """RGB image (height, width, 3) from the optical-frame pose ``world_from_cam``.
+
+        ``frame_id`` seeds per-frame effects (rain). ``markers_world`` (N, 3) draws unlit red
+        spheres, e.g. to check projections.
+        """
+        sc = self.scene
+        r = self._renderer(width, height)
+        r.update_scene(sc.data, camera=-1, scene_option=self.option)
+        half_w = NEAR_M * np.tan(np.radians(fov_deg) / 2)
+        half_h = half_w * height / width
+        rot, pos = world_from_cam[:3, :3], world_from_cam[:3, 3]
+        for cam in r.scene.camera:
+            cam.pos[:] = pos
+            cam.forward[:] = rot[:, 2]
+            cam.up[:] = -rot[:, 1]
+            cam.frustum_center = 0.0
+            cam.frustum_width = half_w
+            cam.frustum_bottom, cam.frustum_top = -half_h, half_h
+            cam.frustum_near, cam.frustum_far = NEAR_M, FAR_M
+            cam.orthographic = 0
+        if markers_world is not None:
+            self._add_markers(r.scene, markers_world, marker_radius_m, (1.0, 0.0, 0.0))
+        self._set_fog(r)
+        image = r.render()
+        rain = self.conditions.weather.rain
+        if rain > 0:
+            _, _, brightness = sky_colors(self.conditions)
+            seed = zlib.crc32(f"{sc.town.spec.seed}:{frame_id}".encode())
+            image = apply_rain(image, rain, brightness, np.random.default_rng(seed))
+        return image
+
+    @staticmethod
+    def _add_markers(
+        scene: mujoco.MjvScene,
+        points: NDArray[np.float64],
+        radius: float,
+        rgb: tuple[float, float, float],
+    ) -> None:
+        for p in points:
+            if scene.ngeom >= scene.maxgeom:
+                break
+            g = scene.geoms[scene.ngeom]
+            mujoco.mjv_initGeom(
+                g, mujoco.mjtGeom.mjGEOM_SPHERE, np.array([radius, 0, 0]), np.asarray(p, float),
+                np.eye(3).ravel(), np.array([*rgb, 1.0], np.float32),
+            )  # fmt: skip
+            g.emission = 1.0
+            g.specular = 0.0
+            scene.ngeom += 1
+
+    def close(self) -> None:
+        for r in self._renderers.values():
+            r.close()
+        self._renderers.clear()

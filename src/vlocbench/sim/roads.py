@@ -1,0 +1,232 @@
+"""Road network of a grid town: intersections, right-hand lanes, turn connectors, routes.
+
+Pure numerics. Roads run along the grid lines ``x = xs[i]`` and ``y = ys[j]``; every road has one
+lane per direction (right-hand traffic). Around each intersection centre lies a square zone of
+half-size ``zone_m = half road width + corner radius``; inside it lanes are joined by connectors
+(straight, or quarter arcs of radius ``zone_m - lane_offset`` for right turns and
+``zone_m + lane_offset`` for left turns). Lane polylines are sampled every ``spacing_m`` (2 m).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import networkx as nx
+import numpy as np
+from numpy.typing import NDArray
+
+from vlocbench.errors import ConfigError
+
+Array = NDArray[np.float64]
+
+# unit headings: east, north, west, south
+HEADINGS: dict[str, tuple[int, int]] = {"E": (1, 0), "N": (0, 1), "W": (-1, 0), "S": (0, -1)}
+
+
+def _right(h: Array) -> Array:
+    return np.array([h[1], -h[0]], dtype=np.float64)
+
+
+def resample_polyline(points_xy: Array, spacing_m: float) -> Array:
+    """Resample an (N, 2) polyline at equal arc length ``spacing_m``, keeping both ends.
+
+    Returns (M, 2) with M = ceil(length / spacing) + 1; the last step may be shorter.
+    """
+    seg = np.linalg.norm(np.diff(points_xy, axis=0), axis=1)
+    keep = np.concatenate([[True], seg > 1e-9])
+    points_xy = points_xy[keep]
+    s = np.concatenate([[0.0], np.cumsum(seg[seg > 1e-9])])
+    total = float(s[-1])
+    n = max(1, int(np.ceil(total / spacing_m - 1e-9)))
+    samples = np.append(np.arange(n) * spacing_m, total)
+    x = np.interp(samples, s, points_xy[:, 0])
+    y = np.interp(samples, s, points_xy[:, 1])
+    return np.stack([x, y], axis=1)
+
+
+def polyline_length(points_xy: Array) -> float:
+    return float(np.linalg.norm(np.diff(points_xy, axis=0), axis=1).sum())
+
+
+def headings_of(points_xy: Array) -> Array:
+    """Heading (rad) at each point of an (N, 2) polyline, from the segment that leaves it."""
+    d = np.diff(points_xy, axis=0)
+    yaw = np.arctan2(d[:, 1], d[:, 0])
+    return np.append(yaw, yaw[-1])
+
+
+def _arc(center: Array, start: Array, sweep_rad: float, step_m: float = 0.5) -> Array:
+    radius = float(np.linalg.norm(start - center))
+    a0 = float(np.arctan2(start[1] - center[1], start[0] - center[0]))
+    n = max(2, int(np.ceil(abs(sweep_rad) * radius / step_m)) + 1)
+    a = a0 + np.linspace(0.0, sweep_rad, n)
+    return center + radius * np.stack([np.cos(a), np.sin(a)], axis=1)
+
+
+@dataclass(frozen=True)
+class RoadLayout:
+    """Geometry of the road grid. ``xs``/``ys``: (I,), (J,) road centre lines in metres."""
+
+    xs: Array
+    ys: Array
+    lane_width_m: float
+    corner_radius_m: float
+
+    @property
+    def half_width_m(self) -> float:
+        return self.lane_width_m  # two lanes: half the road is one lane
+
+    @property
+    def lane_offset_m(self) -> float:
+        return 0.5 * self.lane_width_m
+
+    @property
+    def zone_m(self) -> float:
+        return self.half_width_m + self.corner_radius_m
+
+    def center(self, node: tuple[int, int]) -> Array:
+        i, j = node
+        return np.array([self.xs[i], self.ys[j]], dtype=np.float64)
+
+    def has_node(self, node: tuple[int, int]) -> bool:
+        i, j = node
+        return 0 <= i < len(self.xs) and 0 <= j < len(self.ys)
+
+    def arrival(self, node: tuple[int, int], heading: Array) -> Array:
+        """Where a lane moving along ``heading`` enters the zone of ``node``."""
+        return self.center(node) - heading * self.zone_m + _right(heading) * self.lane_offset_m
+
+    def departure(self, node: tuple[int, int], heading: Array) -> Array:
+        """Where a lane moving along ``heading`` leaves the zone of ``node``."""
+        return self.center(node) + heading * self.zone_m + _right(heading) * self.lane_offset_m
+
+    def connector(self, node: tuple[int, int], h_in: Array, h_out: Array) -> Array:
+        """Polyline (N, 2) through the zone of ``node`` from heading ``h_in`` to ``h_out``."""
+        p0 = self.arrival(node, h_in)
+        p1 = self.departure(node, h_out)
+        cross = h_in[0] * h_out[1] - h_in[1] * h_out[0]
+        if abs(cross) < 0.5:  # straight on
+            return np.stack([p0, p1])
+        left = cross > 0
+        radius = self.zone_m + self.lane_offset_m if left else self.zone_m - self.lane_offset_m
+        normal = -_right(h_in) if left else _right(h_in)
+        return _arc(p0 + normal * radius, p0, np.pi / 2 if left else -np.pi / 2)
+
+
+def build_lane_graph(layout: RoadLayout, spacing_m: float = 2.0) -> nx.DiGraph:
+    """Directed lane graph of a full grid of roads.
+
+    Nodes: ``("in", i, j, d)`` where a lane heading ``d`` enters intersection (i, j)'s zone, and
+    ``("out", i, j, d)`` where it leaves; attribute ``xy`` (2,). Edges carry ``polyline`` ((N, 2),
+    every ``spacing_m``), ``length_m`` and ``kind`` in {lane, straight, left, right}.
+    """
+    graph = nx.DiGraph()
+    ni, nj = len(layout.xs), len(layout.ys)
+    for i in range(ni):
+        for j in range(nj):
+            for d, (dx, dy) in HEADINGS.items():
+                h = np.array([dx, dy], dtype=np.float64)
+                nxt = (i + dx, j + dy)
+                if layout.has_node(nxt):  # a lane leaves (i, j) towards nxt
+                    a, b = layout.departure((i, j), h), layout.arrival(nxt, h)
+                    out, inn = ("out", i, j, d), ("in", *nxt, d)
+                    graph.add_node(out, xy=a)
+                    graph.add_node(inn, xy=b)
+                    line = resample_polyline(np.stack([a, b]), spacing_m)
+                    graph.add_edge(
+                        out, inn, polyline=line, length_m=polyline_length(line), kind="lane"
+                    )
+    for node in list(graph.nodes):
+        kind, i, j, d = node
+        if kind != "in":
+            continue
+        h_in = np.array(HEADINGS[d], dtype=np.float64)
+        for d2, (dx, dy) in HEADINGS.items():
+            h_out = np.array([dx, dy], dtype=np.float64)
+            if h_in @ h_out < -0.5 or ("out", i, j, d2) not in graph:  # no U-turns
+                continue
+            cross = h_in[0] * h_out[1] - h_in[1] * h_out[0]
+            turn = "straight" if abs(cross) < 0.5 else ("left" if cross > 0 else "right")
+            line = resample_polyline(layout.connector((i, j), h_in, h_out), spacing_m)
+            graph.add_edge(
+                node, ("out", i, j, d2), polyline=line, length_m=polyline_length(line), kind=turn
+            )
+    return graph
+
+
+@dataclass(frozen=True)
+class Route:
+    """A drivable route along right-hand lanes.
+
+    ``waypoints_xy``: (N, 2) every ``spacing_m`` (the last step may be shorter);
+    ``yaw_rad``: (N,) heading at each waypoint; ``nodes``: the intersections it turns at.
+    """
+
+    waypoints_xy: Array
+    yaw_rad: Array
+    nodes: tuple[tuple[int, int], ...]
+    spacing_m: float
+
+    @property
+    def length_m(self) -> float:
+        return polyline_length(self.waypoints_xy)
+
+    @property
+    def num_turns(self) -> int:
+        return max(0, len(self.nodes) - 2)
+
+
+def build_route(
+    layout: RoadLayout,
+    nodes: tuple[tuple[int, int], ...],
+    start_offset_m: float,
+    end_offset_m: float,
+    spacing_m: float = 2.0,
+    field: str = "route",
+) -> Route:
+    """Route through grid intersections ``nodes``, turning 90 degrees at each inner node.
+
+    It starts ``start_offset_m`` past ``nodes[0]`` on the first leg and ends ``end_offset_m``
+    before ``nodes[-1]``; both offsets must keep clear of the intersection zones.
+    """
+    if len(nodes) < 2:
+        raise ConfigError(f"{field}.nodes", "needs at least two intersections")
+    for k, node in enumerate(nodes):
+        if not layout.has_node(node):
+            raise ConfigError(
+                f"{field}.nodes[{k}]",
+                f"{node} is outside the grid of {len(layout.xs)}x{len(layout.ys)} intersections",
+            )
+    headings = []
+    for k in range(len(nodes) - 1):
+        d = np.array(nodes[k + 1], dtype=np.float64) - np.array(nodes[k], dtype=np.float64)
+        if (d[0] != 0) == (d[1] != 0):
+            raise ConfigError(
+                f"{field}.nodes[{k + 1}]", "consecutive nodes must share a row or a column"
+            )
+        headings.append(d / np.linalg.norm(d))
+    for k in range(1, len(headings)):
+        if abs(headings[k - 1] @ headings[k]) > 0.5:
+            raise ConfigError(f"{field}.nodes[{k}]", "every inner node must be a 90-degree turn")
+    first_len = float(np.linalg.norm(layout.center(nodes[1]) - layout.center(nodes[0])))
+    last_len = float(np.linalg.norm(layout.center(nodes[-1]) - layout.center(nodes[-2])))
+    zone = layout.zone_m
+    if not zone <= start_offset_m <= first_len - zone - (0 if len(nodes) == 2 else zone):
+        raise ConfigError(
+            f"{field}.start_offset_m",
+            f"must lie in [{zone:g}, {first_len - 2 * zone:g}] to stay clear of intersections",
+        )
+    if not zone <= end_offset_m <= last_len - 2 * zone:
+        raise ConfigError(
+            f"{field}.end_offset_m",
+            f"must lie in [{zone:g}, {last_len - 2 * zone:g}] to stay clear of intersections",
+        )
+    h0, hn = headings[0], headings[-1]
+    start = layout.center(nodes[0]) + h0 * start_offset_m + _right(h0) * layout.lane_offset_m
+    end = layout.center(nodes[-1]) - hn * end_offset_m + _right(hn) * layout.lane_offset_m
+    pieces = [start[None]]
+    for k in range(1, len(nodes) - 1):
+        pieces.append(layout.connector(nodes[k], headings[k - 1], headings[k]))
+    pieces.append(end[None])
+    waypoints = resample_polyline(np.concatenate(pieces), spacing_m)
+    return Route(waypoints, headings_of(waypoints), tuple(nodes), spacing_m)

@@ -1,0 +1,598 @@
+"""The MuJoCo model of a town: merged textured meshes to draw, primitives to collide with.
+
+Static geometry is merged into one mesh per material (few draw calls keep llvmpipe fast); for
+collisions every building, trunk, pole, parked car and sidewalk slab is a primitive (box/cylinder) in
+geom group 4, which cameras never draw. The ego car is a free body (geom group 5, hidden from its
+own cameras) carrying two headlight spots; traffic cars and pedestrians are free bodies in group 3.
+
+Collision filtering: static geoms have contype 0, conaffinity 1; the ego has contype 1, conaffinity 0;
+so only ego-vs-world and ego-vs-traffic pairs are ever tested.
+"""
+
+from __future__ import annotations
+
+from collections import defaultdict
+from dataclasses import dataclass, field
+
+import mujoco
+import numpy as np
+from numpy.typing import NDArray
+
+from vlocbench.sim import textures as tex
+from vlocbench.sim.meshes import MeshBuilder, platform_mesh
+from vlocbench.sim.town import Town
+
+Array = NDArray[np.float64]
+
+GROUP_STATIC, GROUP_FOLIAGE_FULL, GROUP_FOLIAGE_SPARSE = 0, 1, 2
+GROUP_TRAFFIC, GROUP_COLLISION, GROUP_EGO = 3, 4, 5
+GROUND_FLOOR_M = 4.2
+SKY_SIZE = 64
+CAR_HALF_M = (2.3, 0.95)  # half length, half width of every car (ego, traffic, parked)
+CAR_COLORS = (
+    (0.75, 0.08, 0.08), (0.1, 0.2, 0.6), (0.85, 0.85, 0.85), (0.1, 0.1, 0.1),
+    (0.5, 0.5, 0.52), (0.9, 0.7, 0.1), (0.15, 0.45, 0.2), (0.55, 0.3, 0.15),
+)  # fmt: skip
+FACADE_TINTS = ((1.0, 1.0, 1.0), (0.9, 0.93, 1.0), (1.0, 0.92, 0.85))
+SEASON_MATERIALS = ("ground", "paving", "road", "roof", "grass")
+
+
+@dataclass(frozen=True)
+class SceneOptions:
+    """Build-time options. ``max_cars``/``max_pedestrians``: traffic slots (free bodies)."""
+
+    max_cars: int = 0
+    max_pedestrians: int = 0
+    cell_m: float = 2.0  # vertex spacing of lit surfaces (per-vertex lighting)
+    max_image_size: int = 2048  # largest render width/height
+
+
+@dataclass
+class TownScene:
+    """A compiled town. ``geom_info[geom_id] = (category, label)`` for collidable geoms."""
+
+    town: Town
+    options: SceneOptions
+    model: mujoco.MjModel
+    data: mujoco.MjData
+    geom_info: dict[int, tuple[str, str]]
+    season_geoms: dict[str, list[int]]  # material family -> geoms whose material follows seasons
+    material_ids: dict[str, int]
+    sky_texture_id: int
+    sun_light_id: int
+    headlight_ids: tuple[int, int]
+    ego_qpos_adr: int
+    car_qpos_adr: tuple[int, ...]
+    pedestrian_qpos_adr: tuple[int, ...]
+    base_rgba: dict[str, Array] = field(default_factory=dict)
+
+    def set_free_pose(
+        self, qpos_adr: int, x_m: float, y_m: float, yaw_rad: float, z_m: float = 0.0
+    ) -> None:
+        q = self.data.qpos
+        q[qpos_adr : qpos_adr + 3] = (x_m, y_m, z_m)
+        q[qpos_adr + 3 : qpos_adr + 7] = (np.cos(yaw_rad / 2), 0.0, 0.0, np.sin(yaw_rad / 2))
+
+    def forward(self) -> None:
+        """Recompute positions of bodies, geoms, cameras and lights from ``data.qpos``."""
+        mujoco.mj_kinematics(self.model, self.data)
+        mujoco.mj_camlight(self.model, self.data)
+
+
+class _SceneBuilder:
+    def __init__(self, town: Town, options: SceneOptions) -> None:
+        self.town = town
+        self.options = options
+        self.rng = np.random.default_rng(town.spec.seed + 7919)
+        self.spec = mujoco.MjSpec()
+        self.meshes: dict[str, MeshBuilder] = defaultdict(MeshBuilder)
+        self.mesh_group: dict[str, int] = {}
+        self.materials: set[str] = set()
+        self.tiles: dict[str, tex.FacadeTile] = {}
+        self.collision: list[tuple[str, str]] = []  # (category, label) per collision geom, in order
+
+    # -- assets ---------------------------------------------------------------------------------
+    def texture(self, name: str, image: NDArray[np.uint8]) -> None:
+        t = self.spec.add_texture(name=name, type=mujoco.mjtTexture.mjTEXTURE_2D)
+        h, w = image.shape[:2]
+        t.width, t.height, t.nchannel = w, h, 3
+        t.data = np.ascontiguousarray(image).tobytes()
+
+    def material(
+        self,
+        name: str,
+        texture: str | None,
+        rgba: tuple[float, ...] = (1, 1, 1, 1),
+        specular: float = 0.1,
+        shininess: float = 0.1,
+        emission: float = 0.0,
+    ) -> None:
+        m = self.spec.add_material(name=name)
+        if texture is not None:
+            m.textures[mujoco.mjtTextureRole.mjTEXROLE_RGB] = texture
+        m.rgba = list(rgba) if len(rgba) == 4 else [*rgba, 1.0]
+        m.specular, m.shininess, m.emission = specular, shininess, emission
+        self.materials.add(name)
+
+    def make_assets(self) -> None:
+        spec, _town, rng = self.town.spec, self.town, self.rng
+        fh = spec.buildings.floor_height_m
+        for s in range(spec.buildings.facade_styles):
+            style = s if spec.style == "town" else (s * 2 + 1) % 4  # cities: stone/concrete/plaster
+            tile = tex.facade(style, fh, rng)
+            self.tiles[f"facade{s}"] = tile
+            self.texture(f"facade{s}", tile.image)
+            for k, tint in enumerate(FACADE_TINTS):
+                self.material(f"facade{s}_{k}", f"facade{s}", tint, specular=0.15)
+        for s in range(3):
+            tile = tex.facade(4, fh, rng)
+            self.tiles[f"tower{s}"] = tile
+            self.texture(f"tower{s}", tile.image)
+            self.material(f"tower{s}", f"tower{s}", specular=0.5, shininess=0.6)
+        for s in range(6):
+            tile = tex.shopfront(s + 6 * spec.seed, GROUND_FLOOR_M, rng)
+            self.tiles[f"shop{s}"] = tile
+            self.texture(f"shop{s}", tile.image)
+            self.material(f"shop{s}", f"shop{s}", specular=0.2)
+        road = tex.road_tile(spec.road.lane_width_m, 12.0, rng)
+        self.texture("road", road)
+        self.texture("road_winter", tex.snowy_road(road, rng))
+        asphalt = tex._finish(tex.asphalt(256, rng), rng, 4)
+        self.texture("asphalt", asphalt)
+        self.texture("asphalt_winter", tex.snowy_road(asphalt, rng))
+        self.texture("crosswalk", tex.crosswalk_tile(rng))
+        self.texture("paving", tex.paving(rng))
+        self.texture("paving_winter", tex.paving(rng, snow=0.8))
+        for kind in (
+            "grass",
+            "autumn_grass",
+            "sand",
+            "water",
+            "roof",
+            "bark",
+            "leaves",
+            "concrete",
+            "metal",
+        ):
+            self.texture(kind, tex.ground(kind, rng))
+        self.texture("snow", tex.ground("concrete", rng, snow=1.2))
+        self.texture("signs", tex.sign_atlas(rng))
+        for family in SEASON_MATERIALS:
+            base = {
+                "ground": "grass",
+                "paving": "paving",
+                "road": "road",
+                "roof": "roof",
+                "grass": "grass",
+            }[family]
+            self.material(family, base, specular=0.05)
+            autumn = {"ground": "autumn_grass", "grass": "autumn_grass"}.get(family, base)
+            self.material(f"{family}_autumn", autumn, specular=0.05)
+            winter = {"road": "road_winter", "paving": "paving_winter"}.get(family, "snow")
+            self.material(f"{family}_winter", winter, specular=0.2)
+        self.material("intersection", "asphalt", specular=0.05)
+        self.material("intersection_winter", "asphalt_winter", specular=0.2)
+        self.material("intersection_autumn", "asphalt", specular=0.05)
+        self.material("crosswalk", "crosswalk", specular=0.05)
+        self.material("curb", "concrete")
+        self.material("sand", "sand")
+        self.material("water", "water", specular=0.8, shininess=0.9)
+        self.material("bark", "bark")
+        self.material("leaves_full", "leaves", (0.33, 0.55, 0.22, 1))
+        self.material("leaves_sparse", "leaves", (0.33, 0.55, 0.22, 1))
+        self.material("metal", "metal", specular=0.4, shininess=0.5)
+        self.material("signs", "signs", specular=0.3)
+        self.material("glass", None, (0.08, 0.1, 0.12, 1), specular=0.8, shininess=0.9)
+        for k, c in enumerate(CAR_COLORS):
+            self.material(f"car{k}", None, c, specular=0.6, shininess=0.7)
+        sky = self.spec.add_texture(name="sky", type=mujoco.mjtTexture.mjTEXTURE_SKYBOX)
+        sky.width, sky.height, sky.nchannel = SKY_SIZE, 6 * SKY_SIZE, 3
+        sky.data = tex.sky((0.35, 0.55, 0.85), (0.75, 0.82, 0.9), SKY_SIZE).tobytes()
+
+    # -- geometry -------------------------------------------------------------------------------
+    def collide_box(
+        self, category: str, label: str, center: Array, half: Array, yaw: float = 0.0
+    ) -> None:
+        self.spec.worldbody.add_geom(
+            name=f"col{len(self.collision)}",
+            type=mujoco.mjtGeom.mjGEOM_BOX,
+            pos=list(center),
+            quat=[np.cos(yaw / 2), 0, 0, np.sin(yaw / 2)],
+            size=list(half),
+            group=GROUP_COLLISION,
+            contype=0,
+            conaffinity=1,
+            rgba=[1, 0, 0, 0],
+        )
+        self.collision.append((category, label))
+
+    def collide_cylinder(
+        self, category: str, label: str, x: float, y: float, radius: float, height: float
+    ) -> None:
+        self.spec.worldbody.add_geom(
+            name=f"col{len(self.collision)}",
+            type=mujoco.mjtGeom.mjGEOM_CYLINDER,
+            pos=[x, y, height / 2],
+            size=[radius, height / 2, 0],
+            group=GROUP_COLLISION,
+            contype=0,
+            conaffinity=1,
+            rgba=[1, 0, 0, 0],
+        )
+        self.collision.append((category, label))
+
+    def roads(self) -> None:
+        town = self.town
+        lay = town.layout
+        hw, zone, cell = lay.half_width_m, lay.zone_m, self.options.cell_m
+        z = np.array([0, 0, 0.02])
+        tile_len = 12.0
+        for i in range(len(lay.xs)):
+            for j in range(len(lay.ys)):
+                c = np.array([lay.xs[i], lay.ys[j], 0.0])
+                self.meshes["intersection"].quad(
+                    c + np.array([-zone, -zone, 0]) + z, np.array([1.0, 0, 0]), np.array([0, 1.0, 0]),
+                    2 * zone, 2 * zone, ((c[0] - zone) / 4, (c[1] - zone) / 4), (0.25, 0.25), cell,
+                )  # fmt: skip
+                for di, dj in ((1, 0), (0, 1)):
+                    if i + di >= len(lay.xs) or j + dj >= len(lay.ys):
+                        continue
+                    b = np.array([lay.xs[i + di], lay.ys[j + dj], 0.0])
+                    h = (b - c) / np.linalg.norm(b - c)
+                    right = np.array([h[1], -h[0], 0.0])
+                    length = float(np.linalg.norm(b - c)) - 2 * zone
+                    start = c + h * zone - right * hw + z
+                    self.meshes["road"].quad(
+                        start,
+                        right,
+                        h,
+                        2 * hw,
+                        length,
+                        (0.0, 0.0),
+                        (1 / (2 * hw), 1 / tile_len),
+                        cell,
+                    )
+                    for end, direction in ((start, h), (start + h * length, -h)):
+                        if self.rng.random() < 0.5:
+                            o = (
+                                end
+                                + direction * (3.0 if direction @ h < 0 else 0.0)
+                                + np.array([0, 0, 0.005])
+                            )
+                            self.meshes["crosswalk"].quad(
+                                o, right, h, 2 * hw, 3.0, (0, 0), (1 / 4, 1 / 4), cell
+                            )
+
+    def ground(self) -> None:
+        x0, y0, x1, y1 = self.town.extent
+        m = 300.0
+        self.meshes["ground"].quad(
+            np.array([x0 - m, y0 - m, 0.0]), np.array([1.0, 0, 0]), np.array([0, 1.0, 0]),
+            x1 - x0 + 2 * m, y1 - y0 + 2 * m, ((x0 - m) / 4, (y0 - m) / 4), (0.25, 0.25), 20.0,
+        )  # fmt: skip
+        for rect in self.town.sand:
+            self.flat("sand", rect, 0.01, 4.0)
+        for rect in self.town.water:
+            self.flat("water", rect, 0.005, 8.0)
+
+    def flat(
+        self, material: str, rect: tuple[float, float, float, float], z: float, tile_m: float
+    ) -> None:
+        x0, y0, x1, y1 = rect
+        self.meshes[material].quad(
+            np.array([x0, y0, z]), np.array([1.0, 0, 0]), np.array([0, 1.0, 0]), x1 - x0, y1 - y0,
+            (x0 / tile_m, y0 / tile_m), (1 / tile_m, 1 / tile_m), self.options.cell_m,
+        )  # fmt: skip
+
+    def platforms(self) -> None:
+        h = self.town.spec.road.curb_height_m
+        for k, p in enumerate(self.town.platforms):
+            platform_mesh(
+                self.meshes["paving"],
+                self.meshes["curb"],
+                p.rect,
+                p.corner_radius_m,
+                h,
+                self.options.cell_m,
+                2.0,
+            )
+            for rect in _slab_boxes(p.rect, p.corner_radius_m):
+                bx0, by0, bx1, by1 = rect
+                c = np.array([(bx0 + bx1) / 2, (by0 + by1) / 2, h / 2])
+                self.collide_box(
+                    "curb", f"sidewalk {k}", c, np.array([(bx1 - bx0) / 2, (by1 - by0) / 2, h / 2])
+                )
+        for rect in self.town.grass:
+            self.flat("grass", rect, h + 0.01, 4.0)
+
+    def buildings(self) -> None:
+        cell = self.options.cell_m
+        up = np.array([0.0, 0, 1])
+        for k, b in enumerate(self.town.buildings):
+            x0, y0, x1, y1 = b.rect
+            corners = [
+                np.array(p, dtype=np.float64)
+                for p in ((x0, y0, 0), (x1, y0, 0), (x1, y1, 0), (x0, y1, 0))
+            ]
+            sides = "SENW"
+            facade = f"tower{b.facade % 3}" if b.tower else f"facade{b.facade}"
+            mat = facade if b.tower else f"{facade}_{b.tint}"
+            tile = self.tiles[facade]
+            for s in range(4):
+                a, c = corners[s], corners[(s + 1) % 4]
+                length = float(np.linalg.norm(c - a))
+                u = (c - a) / length
+                z0 = 0.0
+                if b.shop >= 0 and sides[s] == b.front:
+                    shop = self.tiles[f"shop{b.shop}"]
+                    self.meshes[f"shop{b.shop}"].quad(
+                        a,
+                        u,
+                        up,
+                        length,
+                        GROUND_FLOOR_M,
+                        (0.0, 1.0),
+                        (1 / shop.width_m, -1 / shop.height_m),
+                        cell,
+                    )
+                    z0 = GROUND_FLOOR_M
+                low = min(b.height_m, 12.0) - z0  # lower walls: fine cells for headlights
+                kv = -1 / tile.height_m
+                self.meshes[mat].quad(
+                    a + up * z0, u, up, length, low, (0.0, 0.0), (1 / tile.width_m, kv), cell
+                )
+                if b.height_m > 12.0:
+                    self.meshes[mat].quad(
+                        a + up * 12.0,
+                        u,
+                        up,
+                        length,
+                        b.height_m - 12.0,
+                        (0.0, (12.0 - z0) * kv),
+                        (1 / tile.width_m, kv),
+                        12.0,
+                    )
+            self.meshes["roof"].quad(
+                np.array([x0, y0, b.height_m]),
+                np.array([1.0, 0, 0]),
+                np.array([0, 1.0, 0]),
+                x1 - x0,
+                y1 - y0,
+                (x0 / 4, y0 / 4),
+                (0.25, 0.25),
+                8.0,
+            )
+            center = np.array([(x0 + x1) / 2, (y0 + y1) / 2, 2.0])
+            self.collide_box(
+                "building", f"building {k}", center, np.array([(x1 - x0) / 2, (y1 - y0) / 2, 2.0])
+            )
+
+    def props(self) -> None:
+        town, rng = self.town, self.rng
+        for k, (x, y, trunk_h, crown_r) in enumerate(town.trees):
+            base = np.array([x, y, 0.0])
+            self.meshes["bark"].cylinder(base, 0.18, trunk_h + crown_r, 6, top_radius=0.08)
+            for _ in range(3):  # bare branches, seen in winter
+                a = rng.uniform(0, 2 * np.pi)
+                tip = base + np.array(
+                    [np.cos(a) * crown_r * 0.8, np.sin(a) * crown_r * 0.8, trunk_h + crown_r * 1.2]
+                )
+                start = base + np.array([0, 0, trunk_h * 0.9])
+                self.meshes["bark"].add(*_branch(start, tip, 0.06))
+            center = base + np.array([0, 0, trunk_h + crown_r * 0.9])
+            radii = np.array([crown_r, crown_r, crown_r * 1.1])
+            self.meshes["leaves_full"].blob(center, radii, rng)
+            self.meshes["leaves_full"].blob(
+                center + rng.uniform(-0.6, 0.6, 3) * crown_r, radii * 0.7, rng
+            )
+            self.meshes["leaves_sparse"].blob(center, radii * 0.72, rng, subdiv=0)
+            self.collide_cylinder("tree", f"tree {k}", x, y, 0.3, 3.0)
+        for k, (x, y, yaw) in enumerate(town.lamps):
+            base = np.array([x, y, 0.0])
+            self.meshes["metal"].cylinder(base, 0.12, 6.5, 6, top_radius=0.08)
+            d = np.array([np.cos(yaw), np.sin(yaw), 0.0])
+            self.meshes["metal"].box(
+                base + d * 0.9 + np.array([0, 0, 6.4]), np.array([0.9, 0.05, 0.05]), yaw
+            )
+            self.meshes["metal"].box(
+                base + d * 1.7 + np.array([0, 0, 6.3]), np.array([0.3, 0.15, 0.1]), yaw
+            )
+            self.collide_cylinder("pole", f"lamp {k}", x, y, 0.15, 3.0)
+        for k, (x, y, yaw, kind) in enumerate(town.signs):
+            base = np.array([x, y, 0.0])
+            self.meshes["metal"].cylinder(base, 0.05, 2.9, 6)
+            f = np.array([np.cos(yaw), np.sin(yaw), 0.0])
+            r = np.array([np.sin(yaw), -np.cos(yaw), 0.0])  # right of the sign's face direction
+            cu, cv = int(kind) % 4, int(kind) // 4
+            o = base + f * 0.06 - r * 0.35 + np.array([0, 0, 2.2])
+            self.meshes["signs"].quad(
+                o, r, np.array([0, 0, 1.0]), 0.7, 0.7, (cu / 4, (cv + 1) / 2), (1 / 2.8, -1 / 1.4)
+            )
+            self.meshes["metal"].quad(o + r * 0.7 - f * 0.02, -r, np.array([0, 0, 1.0]), 0.7, 0.7)
+            self.collide_cylinder("pole", f"sign {k}", x, y, 0.1, 3.0)
+        for k, (x, y) in enumerate(town.bollards):
+            self.meshes["metal"].cylinder(np.array([x, y, 0.0]), 0.1, 0.9, 6)
+            self.collide_cylinder("pole", f"bollard {k}", x, y, 0.12, 0.9)
+        for k, (x, y, yaw, color) in enumerate(town.parked_cars):
+            self.car_mesh(f"car{int(color)}", np.array([x, y]), yaw)
+            self.collide_box(
+                "parked_car",
+                f"parked car {k}",
+                np.array([x, y, 0.75]),
+                np.array([*CAR_HALF_M, 0.75]),
+                yaw,
+            )
+
+    def car_mesh(self, material: str, xy: Array, yaw: float) -> None:
+        hx, hy = CAR_HALF_M
+        self.meshes[material].box(np.array([xy[0], xy[1], 0.65]), np.array([hx, hy, 0.35]), yaw)
+        c, s = np.cos(yaw), np.sin(yaw)
+        cab = np.array([xy[0] - 0.3 * c, xy[1] - 0.3 * s, 1.25])
+        self.meshes["glass"].box(cab, np.array([hx * 0.55, hy * 0.92, 0.26]), yaw)
+
+    # -- bodies ---------------------------------------------------------------------------------
+    def bodies(self) -> None:
+        hx, hy = CAR_HALF_M
+        ego = self.spec.worldbody.add_body(name="ego")
+        ego.add_freejoint(name="ego")
+        ego.add_geom(name="ego_body", type=mujoco.mjtGeom.mjGEOM_BOX, pos=[0, 0, 0.95], size=[hx, hy, 0.65],
+                     group=GROUP_EGO, contype=1, conaffinity=0, rgba=[0.8, 0.1, 0.1, 1])  # fmt: skip
+        # drives onto a sidewalk far enough: this low, narrow box reaches the slab
+        ego.add_geom(name="ego_curb", type=mujoco.mjtGeom.mjGEOM_BOX, pos=[0, 0, 0.08], size=[hx * 0.6, 0.35, 0.05],
+                     group=GROUP_EGO, contype=1, conaffinity=0, rgba=[0.2, 0.2, 0.2, 1])  # fmt: skip
+        for side in (1, -1):
+            ego.add_light(
+                name=f"headlight_{'left' if side > 0 else 'right'}",
+                type=mujoco.mjtLightType.mjLIGHT_SPOT,
+                pos=[hx, side * 0.7, 0.75],
+                dir=[1.0, -0.25 * side - 0.1, -0.12],
+                cutoff=50.0,
+                exponent=2.0,
+                attenuation=[1.0, 0.0, 0.004],
+                diffuse=[1.0, 0.97, 0.88],
+                ambient=[0, 0, 0],
+                specular=[0.3, 0.3, 0.3],
+                castshadow=False,
+                active=False,
+            )
+        for k in range(self.options.max_cars):
+            car = self.spec.worldbody.add_body(name=f"traffic_car{k}", pos=[0, 0, -50])
+            car.add_freejoint(name=f"traffic_car{k}")
+            color = CAR_COLORS[k % len(CAR_COLORS)]
+            car.add_geom(name=f"car_body{k}", type=mujoco.mjtGeom.mjGEOM_BOX, pos=[0, 0, 0.65], size=[hx, hy, 0.35],
+                         group=GROUP_TRAFFIC, contype=0, conaffinity=1, rgba=[*color, 1])  # fmt: skip
+            car.add_geom(name=f"car_cabin{k}", type=mujoco.mjtGeom.mjGEOM_BOX, pos=[-0.3, 0, 1.25], size=[hx * 0.55, hy * 0.92, 0.26],
+                         group=GROUP_TRAFFIC, contype=0, conaffinity=1, rgba=[0.08, 0.1, 0.12, 1])  # fmt: skip
+        for k in range(self.options.max_pedestrians):
+            ped = self.spec.worldbody.add_body(name=f"pedestrian{k}", pos=[0, 0, -50])
+            ped.add_freejoint(name=f"pedestrian{k}")
+            shirt = self.rng.uniform(0.1, 0.9, 3)
+            ped.add_geom(name=f"ped_body{k}", type=mujoco.mjtGeom.mjGEOM_CAPSULE, pos=[0, 0, 0.85], size=[0.22, 0.55, 0],
+                         group=GROUP_TRAFFIC, contype=0, conaffinity=1, rgba=[*shirt, 1])  # fmt: skip
+            ped.add_geom(name=f"ped_head{k}", type=mujoco.mjtGeom.mjGEOM_SPHERE, pos=[0, 0, 1.65], size=[0.13, 0, 0],
+                         group=GROUP_TRAFFIC, contype=0, conaffinity=1, rgba=[0.85, 0.67, 0.55, 1])  # fmt: skip
+
+    def build(self) -> TownScene:
+        spec = self.spec
+        spec.modelname = self.town.name
+        vis = spec.visual
+        vis.global_.offwidth = vis.global_.offheight = self.options.max_image_size
+        vis.headlight.active = 0
+        vis.quality.shadowsize = 4096
+        self.make_assets()
+        self.ground()
+        self.roads()
+        self.platforms()
+        self.buildings()
+        self.props()
+        season_geoms: dict[str, list[str]] = defaultdict(list)
+        for name, mb in self.meshes.items():
+            if not mb:
+                continue
+            v, uv, f = mb.arrays()
+            mesh = spec.add_mesh(name=f"mesh_{name}")
+            mesh.inertia = mujoco.mjtMeshInertia.mjMESH_INERTIA_SHELL
+            mesh.uservert = v.ravel().tolist()
+            mesh.usertexcoord = uv.ravel().tolist()
+            mesh.userface = f.ravel().tolist()
+            group = {"leaves_full": GROUP_FOLIAGE_FULL, "leaves_sparse": GROUP_FOLIAGE_SPARSE}.get(
+                name, GROUP_STATIC
+            )
+            spec.worldbody.add_geom(
+                name=f"vis_{name}", type=mujoco.mjtGeom.mjGEOM_MESH, meshname=f"mesh_{name}",
+                material=name, contype=0, conaffinity=0, group=group,
+            )  # fmt: skip
+            family = "road" if name == "road" else name
+            if family in (*SEASON_MATERIALS, "intersection"):
+                season_geoms[family].append(f"vis_{name}")
+        spec.worldbody.add_light(
+            name="sun", type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL, dir=[0.3, 0.4, -0.85],
+            diffuse=[0.8, 0.8, 0.8], ambient=[0.3, 0.3, 0.3], specular=[0.2, 0.2, 0.2], castshadow=False,
+        )  # fmt: skip
+        self.bodies()
+        model = spec.compile()
+        data = mujoco.MjData(model)
+        geom_info = {model.geom(f"col{k}").id: info for k, info in enumerate(self.collision)}
+        for k in range(self.options.max_cars):
+            for g in (f"car_body{k}", f"car_cabin{k}"):
+                geom_info[model.geom(g).id] = ("car", f"traffic car {k}")
+        for k in range(self.options.max_pedestrians):
+            for g in (f"ped_body{k}", f"ped_head{k}"):
+                geom_info[model.geom(g).id] = ("pedestrian", f"pedestrian {k}")
+
+        def qadr(joint: str) -> int:
+            return int(model.jnt_qposadr[model.joint(joint).id])
+
+        scene = TownScene(
+            town=self.town,
+            options=self.options,
+            model=model,
+            data=data,
+            geom_info=geom_info,
+            season_geoms={k: [model.geom(n).id for n in v] for k, v in season_geoms.items()},
+            material_ids={name: model.material(name).id for name in self.materials},
+            sky_texture_id=model.texture("sky").id,
+            sun_light_id=model.light("sun").id,
+            headlight_ids=(model.light("headlight_left").id, model.light("headlight_right").id),
+            ego_qpos_adr=qadr("ego"),
+            car_qpos_adr=tuple(qadr(f"traffic_car{k}") for k in range(self.options.max_cars)),
+            pedestrian_qpos_adr=tuple(
+                qadr(f"pedestrian{k}") for k in range(self.options.max_pedestrians)
+            ),
+        )
+        scene.base_rgba = {n: model.mat_rgba[i].copy() for n, i in scene.material_ids.items()}
+        for k in range(self.options.max_cars):
+            scene.set_free_pose(scene.car_qpos_adr[k], 0.0, 0.0, 0.0, -50.0)
+        for k in range(self.options.max_pedestrians):
+            scene.set_free_pose(scene.pedestrian_qpos_adr[k], 0.0, 0.0, 0.0, -50.0)
+        route = self.town.route
+        scene.set_free_pose(scene.ego_qpos_adr, *route.waypoints_xy[0], route.yaw_rad[0])
+        scene.forward()
+        return scene
+
+
+def _branch(start: Array, tip: Array, radius: float) -> tuple[Array, Array, NDArray[np.int64]]:
+    """A thin 4-sided prism from ``start`` to ``tip``."""
+    d = tip - start
+    side = np.cross(d, [0.0, 0.0, 1.0])
+    side = side / (np.linalg.norm(side) + 1e-9) * radius
+    up = np.cross(side, d)
+    up = up / (np.linalg.norm(up) + 1e-9) * radius
+    ring = np.array([side, up, -side, -up])
+    verts = np.concatenate([start + ring, tip + ring * 0.4])
+    faces = []
+    for k in range(4):
+        a, b = k, (k + 1) % 4
+        faces += [[a, b, b + 4], [a, b + 4, a + 4]]
+    uv = np.concatenate([np.zeros((4, 2)), np.ones((4, 2))])
+    return verts, uv, np.array(faces, dtype=np.int64)
+
+
+def _slab_boxes(
+    rect: tuple[float, float, float, float], radius: float
+) -> list[tuple[float, float, float, float]]:
+    """Boxes inside a rounded rectangle that cover it up to a few centimetres at the corners."""
+    x0, y0, x1, y1 = rect
+    if radius <= 0:
+        return [rect]
+    r = radius
+    boxes = [(x0 + r, y0, x1 - r, y1), (x0, y0 + r, x0 + r, y1 - r), (x1 - r, y0 + r, x1, y1 - r)]
+    # each corner quarter-disc as strips whose outer corners stay inside the circle
+    for k in range(3):
+        a, b = k * r / 3.5, (k + 1) * r / 3.5  # distance from the corner circle's centre along x
+        half = float(np.sqrt(r * r - b * b))  # strip height that stays inside the circle
+        for cx, cy, sx, sy in (
+            (x0 + r, y0 + r, -1, -1),
+            (x1 - r, y0 + r, 1, -1),
+            (x1 - r, y1 - r, 1, 1),
+            (x0 + r, y1 - r, -1, 1),
+        ):
+            xa, xb = sorted((cx + sx * a, cx + sx * b))
+            ya, yb = sorted((cy, cy + sy * half))
+            boxes.append((xa, ya, xb, yb))
+    return boxes
+
+
+def build_scene(town: Town, options: SceneOptions | None = None) -> TownScene:
+    """Compile ``town`` into a MuJoCo model (deterministic in the town's seed)."""
+    return _SceneBuilder(town, options or SceneOptions()).build()

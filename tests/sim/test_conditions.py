@@ -1,0 +1,35 @@
+import pytest
+
+from vlocbench.config import config_hash, from_dict
+from vlocbench.errors import ConfigError, UnknownNameError
+from vlocbench.sim import Conditions, Illumination, Intrinsics, Weather
+
+
+def test_illumination_halves_intensity_and_elevation():
+    a, b = Illumination(k=0), Illumination(k=2)
+    assert b.sun_intensity == pytest.approx(a.sun_intensity / 4)
+    assert b.sun_elevation_rad == pytest.approx(a.sun_elevation_rad / 4)
+
+
+def test_bad_values_name_their_field():
+    with pytest.raises(ConfigError, match=r"illumination\.k"):
+        Illumination(k=-1)
+    with pytest.raises(ConfigError, match=r"fog_visual_range_m"):
+        Weather(fog_visual_range_m=-5)
+    with pytest.raises(ConfigError, match=r"fov_deg"):
+        Intrinsics(fov_deg=180)
+    with pytest.raises(ConfigError, match=r"fov_deg"):
+        Intrinsics(fov_deg=0)
+    with pytest.raises(UnknownNameError, match="autumn, summer, winter"):
+        Conditions(season="spring")  # type: ignore[arg-type]
+
+
+def test_from_dict_builds_nested_conditions_and_hashes_stably():
+    c = from_dict(Conditions, {"illumination": {"k": 3}, "weather": {"fog_visual_range_m": 30}})
+    assert c.illumination.k == 3.0 and c.weather.fog_density_per_m == pytest.approx(0.1)
+    assert config_hash(c) == config_hash(
+        from_dict(Conditions, {"illumination": {"k": 3.0}, "weather": {"fog_visual_range_m": 30.0}})
+    )
+    assert config_hash(c) != config_hash(Conditions())
+    with pytest.raises(ConfigError, match=r"weather\.rain"):
+        from_dict(Conditions, {"weather": {"rain": "heavy"}})

@@ -1,0 +1,139 @@
+"""Rendering under conditions, on real renders of the small town (low resolution)."""
+
+import itertools
+
+import cv2
+import numpy as np
+import pytest
+
+from vlocbench.geometry import invert_pose, planar_pose
+from vlocbench.sim import (
+    Camera,
+    Conditions,
+    Extrinsics,
+    Headlights,
+    Illumination,
+    Intrinsics,
+    Simulator,
+    Weather,
+    gallery_camera,
+    generate_town,
+    load_town_spec,
+)
+from vlocbench.sim.camera import project
+
+SMALL = Intrinsics(320, 240, 90.0)
+
+
+def render(sim, conditions, camera=None, waypoint=10):
+    wp = sim.town.route.waypoints_xy[waypoint]
+    sim.teleport(float(wp[0]), float(wp[1]), float(sim.town.route.yaw_rad[waypoint]))
+    sim.set_conditions(conditions)
+    camera = camera or Camera("g", SMALL, Extrinsics())
+    return sim.render([camera])[0]
+
+
+def gray(frame):
+    return cv2.cvtColor(frame.image, cv2.COLOR_RGB2GRAY).astype(np.float64)
+
+
+def test_same_seed_same_image_bytes(small_town, small_sim):
+    a = render(small_sim, Conditions(weather=Weather(rain=0.5))).image
+    other = Simulator(generate_town(small_town.spec))
+    b = render(other, Conditions(weather=Weather(rain=0.5))).image
+    other.close()
+    assert a.shape == (240, 320, 3) and a.dtype == np.uint8
+    assert a.tobytes() == b.tobytes()
+
+
+def test_brightness_falls_with_k(small_sim):
+    means = [
+        gray(render(small_sim, Conditions(illumination=Illumination(k=k)))).mean()
+        for k in (0, 3, 6, 10)
+    ]
+    assert all(a > b for a, b in itertools.pairwise(means)), means
+    assert means[-1] < 10 < 60 < means[0]
+
+
+def test_contrast_falls_with_fog(small_sim):
+    front = Camera("front", SMALL, Extrinsics(z_m=1.6, yaw_deg=0.0))
+    stds = [
+        gray(render(small_sim, Conditions(weather=Weather(fog_visual_range_m=v)), front)).std()
+        for v in (None, 60.0, 10.0)
+    ]
+    assert stds[0] > stds[1] > stds[2], stds
+
+
+def test_winter_differs_from_summer(small_sim):
+    summer = render(small_sim, Conditions()).image.astype(np.float64)
+    winter = render(small_sim, Conditions(season="winter")).image.astype(np.float64)
+    assert np.abs(summer - winter).mean() > 5
+    # snow on the sidewalk in the lower part of the image
+    assert winter[-60:].mean() > summer[-60:].mean() + 10
+
+
+def test_headlights_light_the_road_at_night(small_sim):
+    front = Camera("front", SMALL, Extrinsics(z_m=1.6, yaw_deg=0.0, pitch_deg=5.0))
+    dark = gray(render(small_sim, Conditions(illumination=Illumination(k=10)), front))
+    lit = gray(
+        render(
+            small_sim,
+            Conditions(illumination=Illumination(k=10), headlights=Headlights(on=True)),
+            front,
+        )
+    )
+    road = slice(SMALL.height // 2 + 20, None)
+    assert lit[road].mean() > dark[road].mean() + 15
+
+
+def test_projection_matches_the_render(small_sim):
+    camera = Camera(
+        "odd",
+        Intrinsics(640, 480, 75.0),
+        Extrinsics(x_m=1.0, y_m=0.2, z_m=1.8, roll_deg=3, pitch_deg=5, yaw_deg=10),
+    )
+    small_sim.set_conditions(Conditions())
+    wp = small_sim.town.route.waypoints_xy[5]
+    world_from_vehicle = planar_pose(
+        float(wp[0]), float(wp[1]), float(small_sim.town.route.yaw_rad[5])
+    )
+    world_from_cam = camera.world_from_cam(world_from_vehicle)
+    rng = np.random.default_rng(0)
+    pts_cam = np.stack(
+        [rng.uniform(-1.5, 1.5, 12), rng.uniform(-1.0, 1.0, 12), rng.uniform(5, 9, 12)], 1
+    )
+    pts_world = pts_cam @ world_from_cam[:3, :3].T + world_from_cam[:3, 3]
+    i = camera.intrinsics
+    image = small_sim.renderer.render(
+        world_from_cam, i.width, i.height, i.fov_deg, markers_world=pts_world, marker_radius_m=0.08
+    )
+    mask = ((image[..., 0] > 200) & (image[..., 1] < 40) & (image[..., 2] < 40)).astype(np.uint8)
+    _n, _, stats, centroids = cv2.connectedComponentsWithStats(mask)
+    found = centroids[1:][stats[1:, cv2.CC_STAT_AREA] > 10]
+    expected, depth = project(i.K, invert_pose(world_from_cam), pts_world)
+    assert (depth > 0).all()
+    assert len(found) >= 10  # a few may overlap
+    errors = np.linalg.norm(found[:, None] - expected[None], axis=2).min(axis=1)
+    assert np.median(errors) < 0.3 and errors.max() < 0.8, errors
+
+
+def test_ego_car_is_not_seen_by_its_cameras(small_sim):
+    # a camera inside the car's body, looking forward: it must see the road, not the car
+    inside = Camera("in", SMALL, Extrinsics(x_m=0.0, z_m=1.0, yaw_deg=0.0))
+    img = render(small_sim, Conditions(), inside).image
+    assert img.std() > 10
+
+
+@pytest.mark.slow
+def test_sift_finds_enough_keypoints_on_town01_gallery_images():
+    town = generate_town(load_town_spec("town01"))
+    sim = Simulator(town)
+    sift = cv2.SIFT_create()
+    counts = []
+    for idx in np.linspace(10, len(town.route.waypoints_xy) - 10, 9).astype(int):
+        x, y = town.route.waypoints_xy[idx]
+        sim.teleport(float(x), float(y), float(town.route.yaw_rad[idx]))
+        image = sim.render([gallery_camera()])[0].image
+        counts.append(len(sift.detect(cv2.cvtColor(image, cv2.COLOR_RGB2GRAY))))
+    sim.close()
+    assert np.median(counts) >= 500, counts
