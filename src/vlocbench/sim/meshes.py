@@ -150,15 +150,13 @@ def icosphere(subdiv: int) -> tuple[Array, NDArray[np.int64]]:
     return np.array(v), np.array(f, dtype=np.int64)
 
 
-def rounded_rect_outline(
-    rect: tuple[float, float, float, float], radius: float, step_m: float = 1.0
-) -> Array:
-    """Counter-clockwise outline (N, 2) of a rectangle with rounded corners (not closed)."""
+def corner_arcs(
+    rect: tuple[float, float, float, float], radius: float, step_m: float
+) -> list[tuple[tuple[float, float], Array]]:
+    """The four rounded corners of ``rect``, counter-clockwise: (centre, arc points (N, 2))."""
     x0, y0, x1, y1 = rect
-    if radius <= 0:
-        return np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]], dtype=np.float64)
     n = max(3, int(np.ceil(0.5 * np.pi * radius / step_m)))
-    pts = []
+    out = []
     for cx, cy, a0 in (
         (x1 - radius, y0 + radius, -np.pi / 2),
         (x1 - radius, y1 - radius, 0.0),
@@ -166,7 +164,18 @@ def rounded_rect_outline(
         (x0 + radius, y0 + radius, np.pi),
     ):
         a = a0 + np.linspace(0, np.pi / 2, n + 1)
-        pts.append(np.stack([cx + radius * np.cos(a), cy + radius * np.sin(a)], 1))
+        out.append(((cx, cy), np.stack([cx + radius * np.cos(a), cy + radius * np.sin(a)], 1)))
+    return out
+
+
+def rounded_rect_outline(
+    rect: tuple[float, float, float, float], radius: float, step_m: float = 1.0
+) -> Array:
+    """Counter-clockwise outline (N, 2) of a rectangle with rounded corners (not closed)."""
+    x0, y0, x1, y1 = rect
+    if radius <= 0:
+        return np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]], dtype=np.float64)
+    pts = [arc for _, arc in corner_arcs(rect, radius, step_m)]
     return np.concatenate(pts)
 
 
@@ -208,15 +217,9 @@ def platform_mesh(
                 uvk,
                 cell_m,
             )
-        n = max(3, int(np.ceil(0.5 * np.pi * r / 1.0)))
-        for cx, cy, a0 in (
-            (x1 - r, y0 + r, -np.pi / 2),
-            (x1 - r, y1 - r, 0.0),
-            (x0 + r, y1 - r, np.pi / 2),
-            (x0 + r, y0 + r, np.pi),
-        ):
-            a = a0 + np.linspace(0, np.pi / 2, n + 1)
-            ring = np.stack([cx + r * np.cos(a), cy + r * np.sin(a), np.full_like(a, height)], 1)
+        for (cx, cy), arc in corner_arcs(rect, r, 1.0):
+            n = len(arc) - 1
+            ring = np.concatenate([arc, np.full((n + 1, 1), height)], axis=1)
             verts = np.concatenate([[[cx, cy, height]], ring])
             faces = np.stack([np.zeros(n, np.int64), np.arange(1, n + 1), np.arange(2, n + 2)], 1)
             top.add(verts, verts[:, :2] / tile_m, faces)
