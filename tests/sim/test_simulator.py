@@ -1,4 +1,5 @@
 import numpy as np
+import pytest
 
 from vlocbench.sim import Conditions, Control, Simulator, Traffic
 
@@ -51,3 +52,12 @@ def test_a_traffic_car_is_a_collision_target(small_town):
     for _ in range(100):
         categories |= {e.category for e in sim.step(Control(throttle=1.0)).collisions}
     assert "car" in categories
+
+
+def test_more_traffic_than_the_scene_holds_is_refused_and_changes_nothing(small_sim):
+    from vlocbench.errors import ConfigError
+
+    before = (small_sim.conditions, small_sim.traffic)
+    with pytest.raises(ConfigError, match="traffic"):
+        small_sim.set_conditions(Conditions(traffic=Traffic(cars=3)))
+    assert (small_sim.conditions, small_sim.traffic) == before

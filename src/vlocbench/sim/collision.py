@@ -8,12 +8,13 @@ import mujoco
 
 from vlocbench.sim.scene import TownScene
 
-CATEGORIES = ("building", "tree", "pole", "parked_car", "curb", "car", "pedestrian")
-
 
 @dataclass(frozen=True)
 class CollisionEvent:
-    """The ego car started touching ``label`` (of ``category``) at ``time_s`` near (x_m, y_m)."""
+    """The ego car started touching ``label`` at ``time_s`` near (x_m, y_m).
+
+    ``category``: building, tree, pole, parked_car, curb, car (traffic) or pedestrian.
+    """
 
     time_s: float
     x_m: float

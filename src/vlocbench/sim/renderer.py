@@ -59,14 +59,16 @@ def fog_color(c: Conditions) -> NDArray:
 class Renderer:
     """Renders RGB images of ``scene`` from arbitrary camera poses under ``apply``-ed conditions."""
 
-    def __init__(self, scene: TownScene, shadows: bool = False) -> None:
+    def __init__(
+        self, scene: TownScene, conditions: Conditions | None = None, shadows: bool = False
+    ) -> None:
         self.scene = scene
         self.shadows = shadows
         self.backend = select_backend()
         self._renderers: dict[tuple[int, int], mujoco.Renderer] = {}
-        self.conditions = Conditions()
         self.option = mujoco.MjvOption()
-        self.apply(Conditions())
+        self.conditions = conditions or Conditions()
+        self.apply(self.conditions)
 
     # -- conditions -----------------------------------------------------------------------------
     def apply(self, conditions: Conditions) -> None:
@@ -115,8 +117,6 @@ class Renderer:
         suffix = {"summer": "", "autumn": "_autumn", "winter": "_winter"}[c.season]
         for family, geoms in sc.season_geoms.items():
             name = family + suffix if family + suffix in sc.material_ids else family
-            if family == "roof" and c.season == "autumn":
-                name = "roof"
             for g in geoms:
                 m.geom_matid[g] = sc.material_ids[name]
         for mat in ("leaves_full", "leaves_sparse"):

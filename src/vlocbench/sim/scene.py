@@ -502,9 +502,8 @@ class _SceneBuilder:
                 name=f"vis_{name}", type=mujoco.mjtGeom.mjGEOM_MESH, meshname=f"mesh_{name}",
                 material=name, contype=0, conaffinity=0, group=group,
             )  # fmt: skip
-            family = "road" if name == "road" else name
-            if family in (*SEASON_MATERIALS, "intersection"):
-                season_geoms[family].append(f"vis_{name}")
+            if name in (*SEASON_MATERIALS, "intersection"):
+                season_geoms[name].append(f"vis_{name}")
         spec.worldbody.add_light(
             name="sun", type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL, dir=[0.3, 0.4, -0.85],
             diffuse=[0.8, 0.8, 0.8], ambient=[0.3, 0.3, 0.3], specular=[0.2, 0.2, 0.2], castshadow=False,

@@ -66,27 +66,25 @@ class Simulator:
         self.state = VehicleState(x0, y0, float(route.yaw_rad[0]))
         self.traffic = TrafficModel(town, traffic, avoid_xy=route.waypoints_xy[0])
         self._renderer: Renderer | None = None
-        self._touching: set[str] = set()
         self._sync()
-        self._touching = set(touching(self.scene))
+        self._touching: set[str] = set(touching(self.scene))
 
     @property
     def renderer(self) -> Renderer:
         if self._renderer is None:
-            self._renderer = Renderer(self.scene, shadows=self.shadows)
-            self._renderer.apply(self.conditions)
+            self._renderer = Renderer(self.scene, self.conditions, shadows=self.shadows)
         return self._renderer
 
     def set_conditions(self, conditions: Conditions) -> None:
         """Change appearance conditions (traffic counts are fixed when the scene is built)."""
         if conditions.traffic != self.conditions.traffic:
-            self.traffic = TrafficModel(self.town, conditions.traffic, avoid_xy=self.position_xy)
             require(
                 conditions.traffic.cars <= self.scene.options.max_cars
                 and conditions.traffic.pedestrians <= self.scene.options.max_pedestrians,
                 "traffic",
                 "more cars or pedestrians than the scene was built with; make a new Simulator",
             )
+            self.traffic = TrafficModel(self.town, conditions.traffic, avoid_xy=self.position_xy)
         self.conditions = conditions
         if self._renderer is not None:
             self._renderer.apply(conditions)

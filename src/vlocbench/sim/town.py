@@ -8,7 +8,6 @@ traffic signs, bollards, parked cars). Generation is a pure function of the spec
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass, field
 from functools import cached_property
 from importlib import resources
@@ -539,7 +538,3 @@ def _grow(rect: Rect, side: Side, d: float) -> Rect:
 def generate_town(spec: TownSpec) -> Town:
     """Generate the town described by ``spec`` (deterministic in ``spec.seed``)."""
     return _Builder(spec).build()
-
-
-def with_seed(spec: TownSpec, seed: int) -> TownSpec:
-    return dataclasses.replace(spec, seed=seed)
