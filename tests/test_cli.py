@@ -16,3 +16,22 @@ def test_unknown_town_is_a_clear_error(capsys):
 def test_bad_fov_names_the_field(capsys, tmp_path):
     assert main(["render", "town10", "--fov", "0", "-o", str(tmp_path / "x.png")]) == 2
     assert "fov_deg" in capsys.readouterr().err
+
+
+def test_drive_prints_failure_rates(capsys, tmp_path):
+    config = tmp_path / "episode.yaml"
+    config.write_text("mode: ground_truth\nlocalization_rate_hz: 1.0\n")
+    assert main(["drive", "town10", "--localizer", "oracle", "--config", str(config)]) == 0
+    out = capsys.readouterr().out
+    assert "town10: route 510 m; oracle, ground_truth" in out
+    assert "seed 0: 0 failures (0.0/km)" in out and "done" in out
+    assert "failure rate F = 0.0 per km over 1 episodes" in out
+
+
+def test_drive_rejects_unknown_localizers_and_bad_configs(capsys, tmp_path):
+    assert main(["drive", "town10", "--localizer", "gps"]) == 2
+    assert "unknown localizer 'gps'; valid: odometry, oracle" in capsys.readouterr().err
+    config = tmp_path / "episode.yaml"
+    config.write_text("latency: {mode: sometimes}\n")
+    assert main(["drive", "town10", "--config", str(config)]) == 2
+    assert "valid: fixed, measured, none" in capsys.readouterr().err

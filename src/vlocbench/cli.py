@@ -84,6 +84,64 @@ def _tour(args: argparse.Namespace) -> int:
     return 0
 
 
+def _drive(args: argparse.Namespace) -> int:
+    import dataclasses
+
+    import numpy as np
+
+    from vlocbench.bench import (
+        EpisodeConfig,
+        OracleConfig,
+        OracleLocalizer,
+        plan_town_route,
+        run_episode,
+    )
+    from vlocbench.config import config_hash, from_dict, load_yaml
+    from vlocbench.errors import UnknownNameError
+    from vlocbench.sim import Simulator
+    from vlocbench.sim.town import generate_town, load_town_spec
+
+    localizers = {
+        "odometry": lambda: None,
+        "oracle": lambda: OracleLocalizer(OracleConfig(args.oracle_sigma, args.oracle_yaw_deg)),
+    }
+    if args.localizer not in localizers:
+        raise UnknownNameError("localizer", args.localizer, localizers)
+    base = from_dict(EpisodeConfig, load_yaml(args.config)) if args.config else EpisodeConfig()
+    if args.mode:
+        base = dataclasses.replace(base, mode=args.mode)
+    town = generate_town(load_town_spec(args.town))
+    sim = Simulator(town)
+    path = plan_town_route(town)
+    localizer = localizers[args.localizer]()
+    print(
+        f"{town.name}: route {path.length_m:.0f} m; {args.localizer}, {base.mode}; "
+        f"config {config_hash(base)}"
+    )
+    rates = []
+    for seed in range(args.seed, args.seed + args.seeds):
+        r = run_episode(sim, path, localizer, dataclasses.replace(base, seed=seed))
+        rates.append(r.failures_per_km)
+        causes = ", ".join(f"{x.cause} at {x.resume_s_m:.0f} m" for x in r.reinitializations)
+        print(
+            f"  seed {seed}: {r.failures} failures ({r.failures_per_km:.1f}/km), tracking "
+            f"{r.tracking_error_mean_m:.2f} m, {'done' if r.completed else 'TIMED OUT'} in "
+            f"{r.sim_time_s:.0f} s simulated ({r.real_time_factor:.0f}x real time)"
+            + (f"; {causes}" if causes else "")
+        )
+    sim.close()
+    print(f"failure rate F = {np.mean(rates):.1f} per km over {len(rates)} episodes")
+    return 0
+
+
+def _demo(args: argparse.Namespace) -> int:
+    from vlocbench.bench.demo import run_demo
+
+    index = run_demo(args.out, towns=tuple(args.towns), stops=args.stops)
+    print(f"report: {index.resolve()}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="vlocbench",
@@ -120,15 +178,26 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--fov", type=float, default=90.0, help="horizontal field of view in degrees")
     p.set_defaults(func=_render)
 
-    for name, help_text, default_out in (
-        ("tour", "render towns under every condition and write an HTML report", "out/tour"),
-        ("demo", "the README's main job: currently the town tour report", "out/demo"),
+    p = sub.add_parser("drive", help="drive a town's route in closed loop and print failure rates")
+    p.add_argument("town", help="built-in town name or a town spec YAML")
+    p.add_argument("--localizer", default="odometry", help="odometry (no localization) or oracle")
+    p.add_argument("--mode", choices=("navigate", "ground_truth"), help="override the config's")
+    p.add_argument("--config", type=Path, help="episode config YAML (EpisodeConfig fields)")
+    p.add_argument("--seed", type=int, default=0, help="first seed")
+    p.add_argument("--seeds", type=int, default=1, help="number of episodes (seeds)")
+    p.add_argument("--oracle-sigma", type=float, default=0.1, help="oracle position noise, m")
+    p.add_argument("--oracle-yaw-deg", type=float, default=1.0, help="oracle yaw noise, deg")
+    p.set_defaults(func=_drive)
+
+    for name, help_text, func in (
+        ("tour", "render towns under every condition and write an HTML report", _tour),
+        ("demo", "the README's main job: closed-loop drives and the town tour", _demo),
     ):
         p = sub.add_parser(name, help=help_text)
-        p.add_argument("--out", type=Path, default=Path(default_out), help="output folder")
-        p.add_argument("--towns", nargs="+", default=["town01", "town10"], help="towns to tour")
-        p.add_argument("--stops", type=int, default=3, help="places along each route")
-        p.set_defaults(func=_tour)
+        p.add_argument("--out", type=Path, default=Path(f"out/{name}"), help="output folder")
+        p.add_argument("--towns", nargs="+", default=["town01", "town10"], help="towns to use")
+        p.add_argument("--stops", type=int, default=3, help="places along each route to render")
+        p.set_defaults(func=func)
     return parser
 
 

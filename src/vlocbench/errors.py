@@ -33,3 +33,7 @@ class UnknownNameError(ConfigError, KeyError):
 
 class RenderBackendError(VlocbenchError, RuntimeError):
     """The headless OpenGL backend cannot start (missing libraries, bad MUJOCO_GL)."""
+
+
+class PlanningError(VlocbenchError, RuntimeError):
+    """No drivable route joins the requested points on the road graph."""

@@ -68,3 +68,31 @@ def transform_points(a_from_b: Array, points_b: Array) -> Array:
 def wrap_angle(angle_rad: float | Array) -> float | Array:
     """Wrap to [-pi, pi)."""
     return (np.asarray(angle_rad) + np.pi) % (2 * np.pi) - np.pi
+
+
+def resample_polyline(points_xy: Array, spacing_m: float) -> Array:
+    """Resample an (N, 2) polyline at equal arc length ``spacing_m``, keeping both ends.
+
+    Returns (M, 2) with M = ceil(length / spacing) + 1; the last step may be shorter.
+    """
+    seg = np.linalg.norm(np.diff(points_xy, axis=0), axis=1)
+    keep = np.concatenate([[True], seg > 1e-9])
+    points_xy = points_xy[keep]
+    s = np.concatenate([[0.0], np.cumsum(seg[seg > 1e-9])])
+    total = float(s[-1])
+    n = max(1, int(np.ceil(total / spacing_m - 1e-9)))
+    samples = np.append(np.arange(n) * spacing_m, total)
+    x = np.interp(samples, s, points_xy[:, 0])
+    y = np.interp(samples, s, points_xy[:, 1])
+    return np.stack([x, y], axis=1)
+
+
+def polyline_length(points_xy: Array) -> float:
+    return float(np.linalg.norm(np.diff(points_xy, axis=0), axis=1).sum())
+
+
+def headings_of(points_xy: Array) -> Array:
+    """Heading (rad) at each point of an (N, 2) polyline, from the segment that leaves it."""
+    d = np.diff(points_xy, axis=0)
+    yaw = np.arctan2(d[:, 1], d[:, 0])
+    return np.append(yaw, yaw[-1])

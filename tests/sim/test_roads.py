@@ -1,7 +1,7 @@
 import networkx as nx
 import numpy as np
 
-from vlocbench.sim.roads import resample_polyline
+from vlocbench.geometry import resample_polyline
 
 
 def test_resample_keeps_ends_and_spacing():

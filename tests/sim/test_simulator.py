@@ -44,6 +44,23 @@ def test_traffic_moves_deterministically(small_town):
     assert (moved > 1.0).sum() >= 5  # cars ~6 m/s, pedestrians ~1.3 m/s over 2 s
 
 
+def test_reset_restarts_time_and_traffic(small_town):
+    sim = Simulator(small_town, Conditions(traffic=Traffic(cars=3, pedestrians=2, seed=4)))
+    x, y = small_town.route.waypoints_xy[0]
+    yaw = float(small_town.route.yaw_rad[0])
+
+    def drive():
+        state = sim.reset(float(x), float(y), yaw)
+        assert state.time_s == 0.0 and state.speed_mps == 0.0
+        for _ in range(30):
+            sim.step(Control(throttle=0.3))
+        return sim.state, np.array(sim.traffic.car_poses() + sim.traffic.pedestrian_poses())
+
+    (a_state, a_traffic), (b_state, b_traffic) = drive(), drive()
+    assert a_state == b_state and a_state.time_s == pytest.approx(1.5)
+    np.testing.assert_array_equal(a_traffic, b_traffic)
+
+
 def test_a_traffic_car_is_a_collision_target(small_town):
     sim = Simulator(small_town, Conditions(traffic=Traffic(cars=1, seed=0)))
     x, y, yaw = sim.traffic.car_poses()[0]

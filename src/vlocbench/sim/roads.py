@@ -9,6 +9,7 @@ half-size ``zone_m = half road width + corner radius``; inside it lanes are join
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 
 import networkx as nx
@@ -16,8 +17,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vlocbench.errors import ConfigError
+from vlocbench.geometry import headings_of, polyline_length, resample_polyline
 
 Array = NDArray[np.float64]
+
 
 # unit headings: east, north, west, south
 HEADINGS: dict[str, tuple[int, int]] = {"E": (1, 0), "N": (0, 1), "W": (-1, 0), "S": (0, -1)}
@@ -25,34 +28,6 @@ HEADINGS: dict[str, tuple[int, int]] = {"E": (1, 0), "N": (0, 1), "W": (-1, 0), 
 
 def _right(h: Array) -> Array:
     return np.array([h[1], -h[0]], dtype=np.float64)
-
-
-def resample_polyline(points_xy: Array, spacing_m: float) -> Array:
-    """Resample an (N, 2) polyline at equal arc length ``spacing_m``, keeping both ends.
-
-    Returns (M, 2) with M = ceil(length / spacing) + 1; the last step may be shorter.
-    """
-    seg = np.linalg.norm(np.diff(points_xy, axis=0), axis=1)
-    keep = np.concatenate([[True], seg > 1e-9])
-    points_xy = points_xy[keep]
-    s = np.concatenate([[0.0], np.cumsum(seg[seg > 1e-9])])
-    total = float(s[-1])
-    n = max(1, int(np.ceil(total / spacing_m - 1e-9)))
-    samples = np.append(np.arange(n) * spacing_m, total)
-    x = np.interp(samples, s, points_xy[:, 0])
-    y = np.interp(samples, s, points_xy[:, 1])
-    return np.stack([x, y], axis=1)
-
-
-def polyline_length(points_xy: Array) -> float:
-    return float(np.linalg.norm(np.diff(points_xy, axis=0), axis=1).sum())
-
-
-def headings_of(points_xy: Array) -> Array:
-    """Heading (rad) at each point of an (N, 2) polyline, from the segment that leaves it."""
-    d = np.diff(points_xy, axis=0)
-    yaw = np.arctan2(d[:, 1], d[:, 0])
-    return np.append(yaw, yaw[-1])
 
 
 def _arc(center: Array, start: Array, sweep_rad: float, step_m: float = 0.5) -> Array:
@@ -99,6 +74,14 @@ class RoadLayout:
     def departure(self, node: tuple[int, int], heading: Array) -> Array:
         """Where a lane moving along ``heading`` leaves the zone of ``node``."""
         return self.center(node) + heading * self.zone_m + _right(heading) * self.lane_offset_m
+
+    def lane_midpoint(self, a: tuple[int, int], b: tuple[int, int]) -> Array:
+        """The middle of the right-hand lane from intersection ``a`` to neighbouring ``b``."""
+        d = self.center(b) - self.center(a)
+        return (
+            0.5 * (self.center(a) + self.center(b))
+            + _right(d / np.linalg.norm(d)) * self.lane_offset_m
+        )
 
     def connector(self, node: tuple[int, int], h_in: Array, h_out: Array) -> Array:
         """Polyline (N, 2) through the zone of ``node`` from heading ``h_in`` to ``h_out``."""
@@ -174,6 +157,20 @@ class Route:
     @property
     def num_turns(self) -> int:
         return max(0, len(self.nodes) - 2)
+
+    def via_points(self, layout: RoadLayout) -> Array:
+        """(K, 2) points that pin this route down for a shortest-path planner: its start, the
+        middle of every block it drives along (bar the first and last, which hold the start and
+        the end), its end."""
+        blocks = []
+        for a, b in itertools.pairwise(self.nodes):
+            step = np.sign(np.subtract(b, a)).astype(int)
+            n = int(np.abs(np.subtract(b, a)).sum())
+            blocks += [
+                (tuple(np.add(a, k * step)), tuple(np.add(a, (k + 1) * step))) for k in range(n)
+            ]
+        inner = [layout.lane_midpoint(a, b) for a, b in blocks[1:-1]]
+        return np.vstack([self.waypoints_xy[:1], *inner, self.waypoints_xy[-1:]])
 
 
 def build_route(

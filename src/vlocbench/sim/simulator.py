@@ -117,6 +117,17 @@ class Simulator:
         self._touching = set(now)
         return StepResult(self.state, events)
 
+    def reset(self, x_m: float, y_m: float, yaw_rad: float) -> VehicleState:
+        """Start an episode: the car at rest at a pose, the clock at 0, traffic at its seeded start.
+
+        After a reset the simulation depends only on the controls that follow, not on its past.
+        """
+        self.state = VehicleState(x_m, y_m, yaw_rad)
+        self.traffic = TrafficModel(self.town, self.conditions.traffic, avoid_xy=self.position_xy)
+        self._sync()
+        self._touching = set(touching(self.scene))
+        return self.state
+
     def teleport(self, x_m: float, y_m: float, yaw_rad: float) -> VehicleState:
         """Place the car at rest at a new pose (re-initialization); contacts there are not events."""
         self.state = at_rest(self.state, x_m, y_m, yaw_rad)

@@ -36,15 +36,14 @@ TOUR_CONDITIONS: dict[str, Conditions] = {
 }
 
 
-def run_tour(
-    out_dir: str | Path,
+def tour_sections(
+    out: Path,
     towns: Sequence[str] = ("town01", "town10"),
     stops: int = 3,
     thumb_width: int = 320,
     camera: Camera | None = None,
-) -> Path:
-    """Render the tour; returns the path of ``index.html``."""
-    out = Path(out_dir)
+) -> list[str]:
+    """Render the tour's images into ``out``; returns an HTML section per town."""
     out.mkdir(parents=True, exist_ok=True)
     camera = camera or gallery_camera()
     forward = Camera("front", Intrinsics(camera.intrinsics.width, camera.intrinsics.height, 90.0),
@@ -84,12 +83,27 @@ def run_tour(
             f"<img src='{name}_conditions.jpg' style='max-width:100%'>"
         )
     settings = html.escape(str({k: to_dict(v) for k, v in TOUR_CONDITIONS.items()}))
+    sections.append(f"<h3>Conditions</h3><pre style='white-space:pre-wrap'>{settings}</pre>")
+    return sections
+
+
+def write_page(out: Path, title: str, sections: Sequence[str]) -> Path:
+    """``out/index.html`` holding ``sections`` under ``title``; returns its path."""
+    out.mkdir(parents=True, exist_ok=True)
     page = (
-        "<!doctype html><meta charset='utf-8'><title>vlocbench tour</title>"
-        "<body style='font-family:sans-serif;margin:2em'><h1>vlocbench: town tour</h1>"
+        f"<!doctype html><meta charset='utf-8'><title>{html.escape(title)}</title>"
+        f"<body style='font-family:sans-serif;margin:2em'><h1>{html.escape(title)}</h1>"
         + "".join(sections)
-        + f"<h3>Conditions</h3><pre style='white-space:pre-wrap'>{settings}</pre></body>"
+        + "</body>"
     )
     index = out / "index.html"
     index.write_text(page)
     return index
+
+
+def run_tour(
+    out_dir: str | Path, towns: Sequence[str] = ("town01", "town10"), stops: int = 3
+) -> Path:
+    """Render the tour; returns the path of ``index.html``."""
+    out = Path(out_dir)
+    return write_page(out, "vlocbench: town tour", tour_sections(out, towns, stops))

@@ -10,8 +10,8 @@ import networkx as nx
 import numpy as np
 from numpy.typing import NDArray
 
+from vlocbench.geometry import polyline_length, resample_polyline
 from vlocbench.sim.conditions import Traffic
-from vlocbench.sim.roads import polyline_length, resample_polyline
 from vlocbench.sim.town import Town
 
 Array = NDArray[np.float64]

@@ -1,0 +1,331 @@
+"""The closed-loop episode: simulator, navigation stack and a localizer in one synchronous loop.
+
+Every step of ``dt_s`` (0.05 s): deliver localization answers that are due, plan and control on the
+pose the mode prescribes (``navigate``: the EKF's; ``ground_truth``: the true one), step the
+simulator, feed the EKF the wheel odometry of that step, track progress and detect failures. A
+failure re-initializes the car, the EKF and the planner at the farthest route waypoint reached.
+
+Localization runs at ``localization_rate_hz`` on images of the true pose. An answer is stamped with
+its image time and reaches the EKF ``latency`` later (none, fixed, or the measured compute time);
+while a query is in flight the localizer takes no new one.
+
+The EKF tracks the rear axle, the point wheel odometry measures: it moves along the car's heading,
+whereas the car's centre slips sideways in turns (by up to 10 degrees at the route's corners), which
+a unicycle motion model would mistake for drift. Poses go in and out of the filter as centre poses.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+
+from vlocbench.bench.localizer import LocalizationQuery, Localizer, PoseEstimate, planar_of
+from vlocbench.bench.records import (
+    EpisodeResult,
+    LocalizationRecord,
+    Reinitialization,
+    Segment,
+    Trajectory,
+)
+from vlocbench.config import config_hash, require
+from vlocbench.geometry import planar_pose, wrap_angle
+from vlocbench.nav import (
+    ControllerConfig,
+    Ekf,
+    EkfConfig,
+    Failure,
+    FailureConfig,
+    FailureDetector,
+    GlobalPlanner,
+    LocalPlanner,
+    LocalPlannerConfig,
+    OdometryNoise,
+    OdometryReading,
+    PoseMeasurement,
+    ProgressConfig,
+    ProgressTracker,
+    VehicleController,
+    WaypointPath,
+    WheelOdometry,
+)
+from vlocbench.sim import Control, Simulator, Town, VehicleState
+
+
+@dataclass(frozen=True)
+class LatencyConfig:
+    """When an answer reaches the EKF: ``none`` (at once), ``fixed`` (``fixed_s`` after its image;
+    the default, deterministic) or ``measured`` (after the method's measured compute time, as on the
+    paper's real-time system; not deterministic)."""
+
+    mode: Literal["none", "fixed", "measured"] = "fixed"
+    fixed_s: float = 0.2
+
+    def __post_init__(self) -> None:
+        require(self.fixed_s >= 0, "latency.fixed_s", "must be >= 0")
+
+
+@dataclass(frozen=True)
+class EpisodeConfig:
+    mode: Literal["navigate", "ground_truth"] = "navigate"
+    seed: int = 0
+    localization_rate_hz: float = 2.0
+    latency: LatencyConfig = field(default_factory=LatencyConfig)
+    # give up after time_limit_factor * (route length / target speed) + 60 s of simulated time
+    time_limit_factor: float = 3.0
+    # what the speed controller reads: the car's speedometer (as the paper's CARLA controller did;
+    # noise-free) or the EKF's speed (the noisy wheel odometry, which the PID's derivative term
+    # amplifies)
+    speed_source: Literal["speedometer", "ekf"] = "speedometer"
+    record_trajectory: bool = True
+    controller: ControllerConfig = field(default_factory=ControllerConfig)
+    local_planner: LocalPlannerConfig = field(default_factory=LocalPlannerConfig)
+    odometry: OdometryNoise = field(default_factory=OdometryNoise)
+    ekf: EkfConfig = field(default_factory=EkfConfig)
+    failure: FailureConfig = field(default_factory=FailureConfig)
+    progress: ProgressConfig = field(default_factory=ProgressConfig)
+
+    def __post_init__(self) -> None:
+        require(
+            0 < self.localization_rate_hz <= 20,
+            "localization_rate_hz",
+            f"must be in (0, 20] Hz, got {self.localization_rate_hz}",
+        )
+        require(self.time_limit_factor >= 1, "time_limit_factor", "must be >= 1")
+
+
+def plan_town_route(town: Town, spacing_m: float = 2.0) -> WaypointPath:
+    """The town's test route as the global planner finds it: start, each leg, goal."""
+    return GlobalPlanner(town.lane_graph, spacing_m).plan(town.route.via_points(town.layout))
+
+
+@dataclass
+class _InFlight:
+    """A localization answer on its way to the EKF."""
+
+    due_s: float
+    time_s: float
+    estimate: PoseEstimate
+    truth: tuple[float, float, float]
+    ekf: tuple[float, float, float]
+    latency_s: float
+
+
+class _Columns:
+    def __init__(self) -> None:
+        self.rows: list[tuple[float, ...]] = []
+
+    def add(self, t: float, s: VehicleState, ekf: tuple[float, float, float]) -> None:
+        self.rows.append((t, s.x_m, s.y_m, s.yaw_rad, *ekf, s.speed_mps))
+
+    def trajectory(self) -> Trajectory:
+        a = np.asarray(self.rows, dtype=np.float64).reshape(-1, 8)
+        return Trajectory(*(a[:, k].copy() for k in range(8)))
+
+
+def _record(p: _InFlight, fused: bool | None) -> LocalizationRecord:
+    e, (tx, ty, tyaw) = p.estimate, p.truth
+    if e.success and e.world_from_vehicle is not None:
+        x, y, yaw = planar_of(e.world_from_vehicle)
+        pos_err = float(np.hypot(x - tx, y - ty))
+        yaw_err = float(np.degrees(abs(wrap_angle(yaw - tyaw))))
+    else:
+        x = y = yaw = pos_err = yaw_err = float("nan")
+    return LocalizationRecord(
+        p.time_s, e.success, x, y, yaw, tx, ty, tyaw, *p.ekf, pos_err, yaw_err,
+        e.compute_time_s, p.latency_s, fused, e.reason,
+    )  # fmt: skip
+
+
+class Episode:
+    """One drive of ``path`` in ``sim`` (use :func:`run_episode`)."""
+
+    def __init__(
+        self,
+        sim: Simulator,
+        path: WaypointPath,
+        localizer: Localizer | None,
+        config: EpisodeConfig,
+    ) -> None:
+        self.sim, self.path, self.localizer, self.config = sim, path, localizer, config
+        self.dt_s = sim.dt_s
+        self.rear_offset_m = 0.5 * sim.params.wheelbase_m
+        seeds = np.random.SeedSequence(config.seed).generate_state(2)
+        self.odometry = WheelOdometry(config.odometry, seed=int(seeds[0]))
+        if localizer is not None:
+            localizer.reset(int(seeds[1]))
+        self.ekf = Ekf(config.ekf)
+        self.planner = LocalPlanner(path, config.local_planner)
+        self.controller = VehicleController(config.controller, self.dt_s)
+        self.progress = ProgressTracker(path, config.progress)
+        self.detector = FailureDetector(config.failure)
+        self.in_flight: list[_InFlight] = []
+        self.records: list[LocalizationRecord] = []
+        self.reinits: list[Reinitialization] = []
+        self.segments: list[Segment] = []
+        self.columns = _Columns()
+        self.segment_start_s = 0.0
+        self.busy_until_s = 0.0
+        self.next_query_s = 1.0 / config.localization_rate_hz
+        self.distance_m = 0.0
+        self.offsets_m: list[float] = []
+
+    # -- frames: the EKF works on the rear axle, everything else on the car's centre ----------
+    def _rear(self, x: float, y: float, yaw: float) -> tuple[float, float, float]:
+        d = self.rear_offset_m
+        return x - d * float(np.cos(yaw)), y - d * float(np.sin(yaw)), yaw
+
+    def _ekf_pose(self) -> tuple[float, float, float]:
+        x, y, yaw = self.ekf.pose
+        d = self.rear_offset_m
+        return x + d * float(np.cos(yaw)), y + d * float(np.sin(yaw)), yaw
+
+    # -- pieces of a step --------------------------------------------------------------------
+    def _restart_at(self, index: int, t: float) -> None:
+        x, y, yaw = (float(v) for v in (*self.path.xy[index], self.path.yaw_rad[index]))
+        if t == 0.0:
+            self.sim.reset(x, y, yaw)
+        else:
+            self.sim.teleport(x, y, yaw)
+        self.ekf.reset(*self._rear(x, y, yaw), t)
+        self.planner.reset(float(self.path.s_m[index]))
+        self.controller.reset()
+        self.detector.restart(t)
+        for p in self.in_flight:  # answers about the car before it was moved are void
+            self.records.append(_record(p, None))
+        self.in_flight.clear()
+
+    def _query(self, t: float, state: VehicleState) -> None:
+        assert self.localizer is not None
+        frames = tuple(self.sim.render(self.localizer.cameras)) if self.localizer.cameras else ()
+        truth = state.world_from_vehicle()
+        gt = truth if getattr(self.localizer, "uses_ground_truth", False) else None
+        prior = planar_pose(*self._ekf_pose())
+        start = time.perf_counter()
+        estimate = self.localizer.localize(LocalizationQuery(t, frames, prior, gt))
+        if estimate.compute_time_s == 0.0:
+            estimate = PoseEstimate(
+                estimate.success, estimate.world_from_vehicle, estimate.covariance,
+                time.perf_counter() - start, estimate.reason, estimate.info,
+            )  # fmt: skip
+        lat = self.config.latency
+        latency = {"none": 0.0, "fixed": lat.fixed_s, "measured": estimate.compute_time_s}[lat.mode]
+        self.in_flight.append(
+            _InFlight(t + latency, t, estimate, planar_of(truth), self._ekf_pose(), latency)
+        )
+        self.busy_until_s = t + latency
+        period = 1.0 / self.config.localization_rate_hz
+        # the next tick after this one at which the localizer is free again
+        while self.next_query_s <= t + 1e-9 or self.next_query_s < self.busy_until_s - 1e-9:
+            self.next_query_s += period
+
+    def _deliver(self, t: float) -> None:
+        due = [p for p in self.in_flight if p.due_s <= t + 1e-9]
+        self.in_flight = [p for p in self.in_flight if p.due_s > t + 1e-9]
+        for p in due:
+            e = p.estimate
+            fused = None
+            if e.success and e.world_from_vehicle is not None:
+                x, y, yaw = self._rear(*planar_of(e.world_from_vehicle))
+                cov = self.config.ekf.pose_covariance() if e.covariance is None else e.covariance
+                fused = self.ekf.update(PoseMeasurement(p.time_s, x, y, yaw, cov)).accepted
+            self.records.append(_record(p, fused))
+
+    def _odometry(self, before: VehicleState, after: VehicleState) -> OdometryReading:
+        """A noisy reading of the rear axle's true motion over one step."""
+        x0, y0, _ = self._rear(before.x_m, before.y_m, before.yaw_rad)
+        x1, y1, _ = self._rear(after.x_m, after.y_m, after.yaw_rad)
+        turned = float(wrap_angle(after.yaw_rad - before.yaw_rad))
+        return self.odometry.read(float(np.hypot(x1 - x0, y1 - y0)) / self.dt_s, turned / self.dt_s)
+
+    def _fail(self, failure: Failure, t: float) -> None:
+        index = self.progress.farthest_index
+        self.segments.append(Segment(self.segment_start_s, self.progress.farthest_s_m))
+        self.reinits.append(
+            Reinitialization(
+                failure.time_s, failure.x_m, failure.y_m, failure.cause, failure.detail,
+                index, float(self.path.s_m[index]),
+            )
+        )  # fmt: skip
+        self.segment_start_s = float(self.path.s_m[index])
+        self._restart_at(index, t)
+
+    # -- the loop ----------------------------------------------------------------------------
+    def run(self) -> EpisodeResult:
+        c = self.config
+        wall0 = time.perf_counter()
+        self._restart_at(0, 0.0)
+        navigate = c.mode == "navigate"
+        limit_s = c.time_limit_factor * self.path.length_m / c.controller.target_speed_mps + 60.0
+        step, t = 0, 0.0
+        while not self.progress.finished and t < limit_s:
+            state = self.sim.state
+            if (
+                self.localizer is not None
+                and t >= self.next_query_s - 1e-9
+                and t >= self.busy_until_s - 1e-9
+            ):
+                self._query(t, state)
+            self._deliver(t)
+            if c.record_trajectory:
+                self.columns.add(t, state, self._ekf_pose())
+            x, y, yaw = self._ekf_pose() if navigate else (state.x_m, state.y_m, state.yaw_rad)
+            speed = float(self.ekf.x[3]) if c.speed_source == "ekf" else state.speed_mps
+            target = self.planner.step(np.array([x, y]), speed)
+            cmd = self.controller.step(x, y, yaw, speed, target.xy, target.remaining_m)
+            result = self.sim.step(Control(cmd.throttle, cmd.steer, cmd.brake))
+            step += 1
+            t = step * self.dt_s
+            new = result.state
+            self.distance_m += float(np.hypot(new.x_m - state.x_m, new.y_m - state.y_m))
+            self.ekf.predict(self._odometry(state, new), self.dt_s)
+            proj = self.progress.update(np.array([new.x_m, new.y_m]))
+            self.offsets_m.append(proj.distance_m)
+            failure = next(
+                (
+                    f
+                    for e in result.collisions
+                    if (f := self.detector.collision(t, e.x_m, e.y_m, f"{e.category} {e.label}"))
+                ),
+                None,
+            ) or self.detector.check(t, new.x_m, new.y_m, new.speed_mps, proj.distance_m)
+            if failure is not None and not self.progress.finished:
+                self._fail(failure, t)
+        if c.record_trajectory:
+            self.columns.add(t, self.sim.state, self._ekf_pose())
+        for p in self.in_flight:
+            self.records.append(_record(p, None))
+        self.segments.append(Segment(self.segment_start_s, self.progress.farthest_s_m))
+        end = self.sim.state
+        ex, ey, _ = self._ekf_pose()
+        return EpisodeResult(
+            config_hash=config_hash(c),
+            mode=c.mode,
+            localizer="odometry" if self.localizer is None else self.localizer.name,
+            route_length_m=self.path.length_m,
+            distance_driven_m=self.distance_m,
+            completed=self.progress.finished,
+            sim_time_s=t,
+            wall_time_s=time.perf_counter() - wall0,
+            reinitializations=tuple(self.reinits),
+            segments=tuple(self.segments),
+            tracking_error_mean_m=float(np.mean(self.offsets_m)) if self.offsets_m else 0.0,
+            final_drift_m=float(np.hypot(ex - end.x_m, ey - end.y_m)),
+            localizations=tuple(self.records),
+            trajectory=self.columns.trajectory(),
+        )
+
+
+def run_episode(
+    sim: Simulator,
+    path: WaypointPath,
+    localizer: Localizer | None = None,
+    config: EpisodeConfig | None = None,
+) -> EpisodeResult:
+    """Drive ``path`` once; ``localizer=None`` is the wheel-odometry-only baseline.
+
+    The simulator is reset first, so the result depends only on ``config`` (and the localizer).
+    """
+    return Episode(sim, path, localizer, config or EpisodeConfig()).run()

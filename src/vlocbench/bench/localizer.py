@@ -1,0 +1,129 @@
+"""The interface between the episode loop and a localization method, and reference localizers.
+
+A localizer receives the images of its camera rig taken at one instant (and, for pose-prior
+methods, the EKF's estimate at that instant) and answers with the vehicle's pose or a failure.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+
+from vlocbench.config import require
+from vlocbench.geometry import Array, planar_pose
+from vlocbench.sim import Camera, Frame
+
+
+@dataclass(frozen=True)
+class LocalizationQuery:
+    """What a localizer sees at ``time_s``.
+
+    ``frames``: one per camera of the localizer's rig, rendered at the true pose.
+    ``prior_world_from_vehicle``: (4, 4) the EKF's estimate at ``time_s``.
+    ``true_world_from_vehicle``: (4, 4) the true pose; set only for localizers that declare
+    ``uses_ground_truth`` (reference methods such as the oracle), ``None`` for every other.
+    """
+
+    time_s: float
+    frames: tuple[Frame, ...]
+    prior_world_from_vehicle: Array
+    true_world_from_vehicle: Array | None = None
+
+
+@dataclass(frozen=True)
+class PoseEstimate:
+    """A localizer's answer. On success ``world_from_vehicle`` is (4, 4); ``covariance`` (3, 3)
+    over (x, y, yaw) or ``None`` for the EKF's default. On failure ``reason`` says why.
+    ``compute_time_s``: the method's own time (wall clock)."""
+
+    success: bool
+    world_from_vehicle: Array | None = None
+    covariance: Array | None = None
+    compute_time_s: float = 0.0
+    reason: str = ""
+    info: dict[str, Any] = field(default_factory=dict)
+
+    @classmethod
+    def failure(cls, reason: str, compute_time_s: float = 0.0) -> PoseEstimate:
+        return cls(False, compute_time_s=compute_time_s, reason=reason)
+
+
+@runtime_checkable
+class Localizer(Protocol):
+    """What the episode loop needs of a localization method."""
+
+    name: str
+
+    @property
+    def cameras(self) -> Sequence[Camera]:
+        """The rig whose images each query carries (empty: no rendering)."""
+        ...
+
+    def reset(self, seed: int) -> None:
+        """A new episode starts (drop sequential state; reseed any randomness)."""
+        ...
+
+    def localize(self, query: LocalizationQuery) -> PoseEstimate: ...
+
+
+def planar_of(world_from_vehicle: Array) -> tuple[float, float, float]:
+    """(x m, y m, yaw rad) of a (4, 4) vehicle pose."""
+    return (
+        float(world_from_vehicle[0, 3]),
+        float(world_from_vehicle[1, 3]),
+        float(np.arctan2(world_from_vehicle[1, 0], world_from_vehicle[0, 0])),
+    )
+
+
+@dataclass(frozen=True)
+class OracleConfig:
+    position_sigma_m: float = 0.0
+    yaw_sigma_deg: float = 0.0
+    failure_probability: float = 0.0
+
+    def __post_init__(self) -> None:
+        require(self.position_sigma_m >= 0, "oracle.position_sigma_m", "must be >= 0")
+        require(self.yaw_sigma_deg >= 0, "oracle.yaw_sigma_deg", "must be >= 0")
+        require(
+            0 <= self.failure_probability <= 1, "oracle.failure_probability", "must be in [0, 1]"
+        )
+
+
+class OracleLocalizer:
+    """Reference method: the true pose with seeded Gaussian noise, failing with a set probability.
+
+    Answers how good localization must be for navigation, with no images rendered.
+    """
+
+    name = "oracle"
+    uses_ground_truth = True
+
+    def __init__(self, config: OracleConfig | None = None) -> None:
+        self.config = config or OracleConfig()
+        self.reset(0)
+
+    @property
+    def cameras(self) -> Sequence[Camera]:
+        return ()
+
+    def reset(self, seed: int) -> None:
+        self.rng = np.random.default_rng(seed)
+
+    def localize(self, query: LocalizationQuery) -> PoseEstimate:
+        c = self.config
+        if query.true_world_from_vehicle is None:
+            raise ValueError("the oracle needs the true pose in its queries")
+        noise = self.rng.standard_normal(3)
+        if self.rng.random() < c.failure_probability:
+            return PoseEstimate.failure("simulated failure")
+        x, y, yaw = planar_of(query.true_world_from_vehicle)
+        pose = planar_pose(
+            x + c.position_sigma_m * noise[0],
+            y + c.position_sigma_m * noise[1],
+            yaw + np.radians(c.yaw_sigma_deg) * noise[2],
+        )
+        var = np.array([c.position_sigma_m**2] * 2 + [np.radians(c.yaw_sigma_deg) ** 2])
+        return PoseEstimate(True, pose, np.diag(np.maximum(var, 1e-4)))

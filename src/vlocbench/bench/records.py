@@ -1,0 +1,117 @@
+"""What an episode produces: typed, plain-data records (numbers and numpy arrays, no I/O)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from vlocbench.geometry import Array
+
+
+@dataclass(frozen=True)
+class LocalizationRecord:
+    """One localization call: the image time, the estimate against the truth at that time.
+
+    Errors are NaN when the call failed. ``ekf_*``: the filter's estimate at the image time (before
+    this estimate was fused). ``fused``: True/False once the EKF accepted/rejected it, None when it
+    was never offered (failure, or a re-initialization came first).
+    """
+
+    time_s: float
+    success: bool
+    x_m: float
+    y_m: float
+    yaw_rad: float
+    true_x_m: float
+    true_y_m: float
+    true_yaw_rad: float
+    ekf_x_m: float
+    ekf_y_m: float
+    ekf_yaw_rad: float
+    position_error_m: float
+    yaw_error_deg: float
+    compute_time_s: float
+    latency_s: float
+    fused: bool | None
+    reason: str
+
+
+@dataclass(frozen=True)
+class Reinitialization:
+    """A navigation failure and where the car was put back.
+
+    (x_m, y_m): where the car truly was when it failed; ``resume_index``/``resume_s_m``: the route
+    waypoint (and its arc length) it restarted from.
+    """
+
+    time_s: float
+    x_m: float
+    y_m: float
+    cause: str
+    detail: str
+    resume_index: int
+    resume_s_m: float
+
+
+@dataclass(frozen=True)
+class Segment:
+    """A stretch of the route driven without failure, by arc length."""
+
+    start_s_m: float
+    end_s_m: float
+
+    @property
+    def length_m(self) -> float:
+        return self.end_s_m - self.start_s_m
+
+
+@dataclass(frozen=True)
+class Trajectory:
+    """Per-step columns, all (N,): time, true pose, EKF pose, true speed."""
+
+    time_s: Array
+    true_x_m: Array
+    true_y_m: Array
+    true_yaw_rad: Array
+    ekf_x_m: Array
+    ekf_y_m: Array
+    ekf_yaw_rad: Array
+    speed_mps: Array
+
+    @property
+    def ekf_position_error_m(self) -> Array:
+        return np.hypot(self.ekf_x_m - self.true_x_m, self.ekf_y_m - self.true_y_m)
+
+
+@dataclass(frozen=True)
+class EpisodeResult:
+    """One drive of a route. Distances in metres, times in seconds (simulated unless ``wall``)."""
+
+    config_hash: str
+    mode: str
+    localizer: str
+    route_length_m: float
+    distance_driven_m: float
+    completed: bool  # reached the goal (else it ran out of time)
+    sim_time_s: float
+    wall_time_s: float
+    reinitializations: tuple[Reinitialization, ...]
+    segments: tuple[Segment, ...]
+    tracking_error_mean_m: float  # mean distance of the true position from the route
+    final_drift_m: float  # EKF position error at the end
+    localizations: tuple[LocalizationRecord, ...]
+    trajectory: Trajectory
+
+    @property
+    def failures(self) -> int:
+        return len(self.reinitializations)
+
+    @property
+    def failures_per_km(self) -> float:
+        """r / L_km: this episode's term of the failure rate F."""
+        return self.failures / (self.route_length_m / 1000.0)
+
+    @property
+    def real_time_factor(self) -> float:
+        return self.sim_time_s / self.wall_time_s if self.wall_time_s > 0 else float("inf")

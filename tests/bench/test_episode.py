@@ -1,0 +1,166 @@
+import dataclasses
+
+import numpy as np
+import pytest
+
+from vlocbench.bench import (
+    EpisodeConfig,
+    LatencyConfig,
+    LocalizationQuery,
+    OracleConfig,
+    OracleLocalizer,
+    PoseEstimate,
+    plan_town_route,
+    run_episode,
+)
+from vlocbench.config import from_dict
+from vlocbench.errors import ConfigError, UnknownNameError
+from vlocbench.geometry import planar_pose
+from vlocbench.nav import OdometryNoise
+from vlocbench.sim import Camera, Extrinsics, Intrinsics, Simulator
+
+
+@pytest.fixture(scope="module")
+def sim(small_town):
+    s = Simulator(small_town)
+    yield s
+    s.close()
+
+
+@pytest.fixture(scope="module")
+def path(small_town):
+    return plan_town_route(small_town)
+
+
+class Probe:
+    """Renders one small camera, checks what it is given, answers the true pose shifted sideways."""
+
+    name = "probe"
+    uses_ground_truth = True
+
+    def __init__(self, shift_left_m=0.0, compute_time_s=0.0, camera=True):
+        self.shift_left_m = shift_left_m
+        self.compute_time_s = compute_time_s
+        self.cam = Camera("probe", Intrinsics(96, 72, 90.0), Extrinsics())
+        self.queries: list[LocalizationQuery] = []
+        self.with_camera = camera
+
+    @property
+    def cameras(self):
+        return (self.cam,) if self.with_camera else ()
+
+    def reset(self, seed):
+        self.queries.clear()
+
+    def localize(self, query):
+        self.queries.append(query)
+        pose = query.true_world_from_vehicle
+        shifted = pose @ planar_pose(0.0, self.shift_left_m, 0.0)
+        return PoseEstimate(True, shifted, None, self.compute_time_s)
+
+
+def test_ground_truth_drive_completes_on_the_route(sim, path):
+    r = run_episode(sim, path, None, EpisodeConfig(mode="ground_truth"))
+    assert r.completed and r.failures == 0
+    assert r.tracking_error_mean_m < 0.3
+    assert r.distance_driven_m == pytest.approx(path.length_m, rel=0.03)
+    assert r.segments[0].start_s_m == 0 and r.segments[0].end_s_m >= path.length_m - 1.0
+    assert r.localizer == "odometry" and not r.localizations
+    tr = r.trajectory
+    assert len(tr.time_s) == round(r.sim_time_s / sim.dt_s) + 1
+    assert 3.5 < np.percentile(tr.speed_mps, 75) < 4.3
+
+
+def test_navigation_on_perfect_localization(sim, path):
+    r = run_episode(sim, path, OracleLocalizer(), EpisodeConfig(seed=1))
+    assert r.completed and r.failures == 0
+    assert r.tracking_error_mean_m < 0.3
+    err = r.trajectory.ekf_position_error_m  # odometry noise between fixes 0.7 s apart
+    assert err.mean() < 0.1 and err.max() < 0.5
+    times = np.array([rec.time_s for rec in r.localizations])
+    assert np.allclose(np.diff(times), 0.5)  # 2 Hz
+    assert all(rec.fused for rec in r.localizations[:-1])
+    assert all(rec.latency_s == 0.2 and rec.position_error_m < 1e-9 for rec in r.localizations)
+
+
+def test_odometry_only_drifts_into_failures_and_reinitializes(sim, path):
+    noisy = OdometryNoise(0.04, 0.1, 0.3)
+    r = run_episode(sim, path, None, EpisodeConfig(seed=2, odometry=noisy))
+    assert r.completed and r.failures >= 1
+    assert len(r.segments) == r.failures + 1
+    for reinit, before, after in zip(r.reinitializations, r.segments, r.segments[1:]):
+        assert reinit.cause in ("collision", "off_route", "stuck")
+        # restarted at the farthest waypoint reached, which ends the segment before
+        assert 0 <= before.end_s_m - reinit.resume_s_m <= 2.0 + 1e-9
+        assert after.start_s_m == reinit.resume_s_m
+        assert reinit.resume_index == int(np.argmin(np.abs(path.s_m - reinit.resume_s_m)))
+    assert r.failures_per_km == pytest.approx(r.failures / (path.length_m / 1000))
+
+
+def test_a_biased_localizer_drives_the_car_into_the_curb(sim, path):
+    r = run_episode(sim, path, Probe(shift_left_m=2.5, camera=False), EpisodeConfig(seed=0))
+    causes = [x.cause for x in r.reinitializations]
+    assert "collision" in causes
+    assert any("curb" in x.detail for x in r.reinitializations if x.cause == "collision")
+    # each failure happened near the route, and the car went on from the route
+    for x in r.reinitializations:
+        assert np.min(np.hypot(*(path.xy - (x.x_m, x.y_m)).T)) < 8.0
+
+
+def test_queries_carry_rendered_frames_and_the_prior(sim, path):
+    probe = Probe()
+    config = EpisodeConfig(mode="ground_truth", localization_rate_hz=1.0)
+    r = run_episode(sim, path, probe, config)
+    assert len(probe.queries) == len(r.localizations) >= 10
+    q = probe.queries[3]
+    assert q.time_s == pytest.approx(4.0)
+    (frame,) = q.frames
+    assert frame.image.shape == (72, 96, 3) and frame.image.std() > 5
+    expected = probe.cam.world_from_cam(q.true_world_from_vehicle)
+    assert np.allclose(frame.world_from_cam, expected)
+    # ground-truth mode: estimates are only scored, the EKF still fuses them
+    assert q.prior_world_from_vehicle.shape == (4, 4)
+    assert all(rec.position_error_m == pytest.approx(0.0, abs=1e-9) for rec in r.localizations)
+
+
+def test_a_slow_localizer_skips_queries_while_busy(sim, path):
+    slow = Probe(compute_time_s=0.8, camera=False)
+    config = EpisodeConfig(mode="ground_truth", latency=LatencyConfig("measured"))
+    r = run_episode(sim, path, slow, config)
+    times = np.array([rec.time_s for rec in r.localizations])
+    assert np.allclose(np.diff(times), 1.0)  # every other 2 Hz tick
+    assert all(rec.latency_s == 0.8 for rec in r.localizations)
+    fast = run_episode(sim, path, slow, dataclasses.replace(config, latency=LatencyConfig("none")))
+    assert np.allclose(np.diff([rec.time_s for rec in fast.localizations]), 0.5)
+
+
+def test_episodes_are_deterministic(sim, path):
+    config = EpisodeConfig(seed=5, odometry=OdometryNoise(0.04, 0.1, 0.3))
+    oracle = OracleLocalizer(
+        OracleConfig(position_sigma_m=0.5, yaw_sigma_deg=2, failure_probability=0.3)
+    )
+    a = run_episode(sim, path, oracle, config)
+    b = run_episode(sim, path, oracle, config)
+    assert a.reinitializations == b.reinitializations
+    for name in ("true_x_m", "true_y_m", "ekf_x_m", "ekf_yaw_rad"):
+        assert np.array_equal(getattr(a.trajectory, name), getattr(b.trajectory, name))
+    assert [r.x_m for r in a.localizations] == pytest.approx(
+        [r.x_m for r in b.localizations], nan_ok=True
+    )
+    assert a.config_hash == b.config_hash
+    c = run_episode(sim, path, oracle, dataclasses.replace(config, seed=6))
+    assert c.config_hash != a.config_hash
+    assert not np.array_equal(a.trajectory.ekf_x_m[:100], c.trajectory.ekf_x_m[:100])
+
+
+def test_bad_episode_config():
+    with pytest.raises(ConfigError, match="localization_rate_hz"):
+        EpisodeConfig(localization_rate_hz=0)
+    with pytest.raises(UnknownNameError, match="valid: ground_truth, navigate"):
+        from_dict(EpisodeConfig, {"mode": "fly"})
+    with pytest.raises(UnknownNameError, match="seed"):
+        from_dict(EpisodeConfig, {"sede": 1})
+    with pytest.raises(ConfigError, match=r"ekf\.metric_gate_m"):
+        from_dict(EpisodeConfig, {"ekf": {"metric_gate_m": -1}})
+    cfg = from_dict(EpisodeConfig, {"latency": {"mode": "none"}, "ekf": {"metric_gate_m": None}})
+    assert cfg.latency.mode == "none" and cfg.ekf.metric_gate_m is None

@@ -1,0 +1,57 @@
+import numpy as np
+import pytest
+
+from vlocbench.errors import ConfigError
+from vlocbench.nav import LocalPlanner, LocalPlannerConfig, WaypointPath
+
+
+def _straight(length_m=100.0):
+    return WaypointPath(
+        np.stack([np.arange(0, length_m + 1, 2.0), np.zeros(int(length_m / 2) + 1)], 1)
+    )
+
+
+def test_target_stays_in_the_lookahead_band():
+    planner = LocalPlanner(_straight())
+    speed = 4.0
+    near, far = planner.band_m(speed)
+    assert (near, far) == pytest.approx((3.6, 12.0))
+    targets = []
+    for x in np.arange(0.0, 60.0, 0.2):  # drive along at 4 m/s, 20 Hz
+        t = planner.step(np.array([x, 0.3]), speed)
+        ahead = t.xy[0] - x
+        assert near - 1e-9 <= ahead <= far + 1e-9
+        assert t.offset_m == pytest.approx(0.3)
+        targets.append(t.index)
+    # kept while inside the band, recomputed (to the far edge) when it falls out
+    assert np.all(np.diff(targets) >= 0)
+    changes = np.flatnonzero(np.diff(targets))
+    assert 5 <= len(changes) <= 10
+    assert planner.path.xy[targets[0], 0] == pytest.approx(12.0)
+
+
+def test_band_has_a_floor_at_rest_and_targets_the_goal_at_the_end():
+    planner = LocalPlanner(_straight())
+    near, far = planner.band_m(0.0)
+    assert near == pytest.approx(3.0) and far > near
+    t = planner.step(np.array([0.0, 0.0]), 0.0)
+    assert 3.0 <= t.xy[0] <= far
+    planner.reset(95.0)
+    t = planner.step(np.array([98.0, 0.0]), 4.0)
+    assert t.index == len(planner.path) - 1
+    assert t.remaining_m == pytest.approx(2.0)
+
+
+def test_closest_point_search_is_local():
+    # an out-and-back route: the return leg runs 1 m beside the outward one
+    out = np.stack([np.arange(0, 51, 2.0), np.zeros(26)], 1)
+    back = np.stack([np.arange(50, -1, -2.0), np.ones(26)], 1)
+    path = WaypointPath(np.vstack([out, [[52.0, 0.5]], back]))
+    planner = LocalPlanner(path)
+    t = planner.step(np.array([10.0, 0.9]), 4.0)  # nearer the return leg, but we just started
+    assert t.s_closest_m < 20 and t.xy[1] == 0.0
+
+
+def test_bad_config():
+    with pytest.raises(ConfigError, match="max_lookahead_s"):
+        LocalPlannerConfig(min_lookahead_s=2.0, max_lookahead_s=1.0)
