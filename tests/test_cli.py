@@ -35,3 +35,27 @@ def test_drive_rejects_unknown_localizers_and_bad_configs(capsys, tmp_path):
     config.write_text("latency: {mode: sometimes}\n")
     assert main(["drive", "town10", "--config", str(config)]) == 2
     assert "valid: fixed, measured, none" in capsys.readouterr().err
+
+
+def test_gallery_build_map_and_localize(tmp_path, capsys):
+    import yaml
+
+    from tests.conftest import small_spec
+    from vlocbench.config import to_dict
+
+    spec = tmp_path / "small.yaml"
+    spec.write_text(yaml.safe_dump(to_dict(small_spec())))
+    gallery, maps = tmp_path / "gallery", tmp_path / "map"
+    args = ["--width", "320", "--height", "240", "--spacing", "4"]
+    assert main(["gallery", str(spec), "--out", str(gallery), *args]) == 0
+    assert "wrote" in capsys.readouterr().out
+    assert main(["build-map", str(gallery), "--method", "sift-vlad", "--out", str(maps)]) == 0
+    assert "points, mean track length" in capsys.readouterr().out
+    image = gallery / "images" / "00008_gallery.png"
+    assert main(["localize", str(image), "--map", str(maps)]) == 0
+    out = capsys.readouterr().out
+    assert "world_from_cam" in out and "inliers" in out
+    assert main(["build-map", str(gallery), "--method", "surf"]) == 2
+    assert "unknown method 'surf'" in capsys.readouterr().err
+    assert main(["localize", str(image), "--map", str(tmp_path / "none")]) == 2
+    assert "not a map" in capsys.readouterr().err

@@ -142,6 +142,88 @@ def _demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def _gallery(args: argparse.Namespace) -> int:
+    from vlocbench.bench.episode import plan_town_route
+    from vlocbench.bench.gallery_capture import capture_gallery
+    from vlocbench.sim import Camera, Conditions, Extrinsics, Illumination, Intrinsics, Simulator
+    from vlocbench.sim.town import generate_town, load_town_spec
+
+    town = generate_town(load_town_spec(args.town))
+    sim = Simulator(town, Conditions(illumination=Illumination(k=args.k)))
+    camera = Camera("gallery", Intrinsics(args.width, args.height, args.fov), Extrinsics())
+    out = args.out or Path("galleries") / f"{town.name}-k{args.k:g}"
+    gallery = capture_gallery(
+        sim, plan_town_route(town), (camera,), out, spacing_m=args.spacing, speed_mps=args.speed
+    )
+    sim.close()
+    print(f"wrote {len(gallery)} images with their poses to {out}")
+    return 0
+
+
+def _build_map(args: argparse.Namespace) -> int:
+    from vlocbench.loc.gallery import Gallery
+    from vlocbench.loc.mapping import MappingConfig, build_map, default_map_dir
+    from vlocbench.loc.registry import method_conf
+
+    gallery = Gallery.load(args.gallery)
+    conf = method_conf(args.method)
+    mapping = MappingConfig(pairs=args.pairs, num_pairs=args.num_pairs)
+    out = args.out or default_map_dir("maps", gallery, args.method, conf, mapping)
+
+    def progress(stage: str, done: int, total: int) -> None:
+        if done == total or done % 50 == 0:
+            print(f"  {stage}: {done}/{total}", flush=True)
+
+    report = build_map(gallery, conf, out, mapping, overwrite=args.overwrite, progress=progress)
+    times = ", ".join(f"{k} {v:.0f} s" for k, v in report.seconds.items())
+    print(
+        f"map {out}: {report.images} images, {report.pairs} pairs, {report.points} points, "
+        f"mean track length {report.mean_track_length:.2f}, mean reprojection error "
+        f"{report.mean_reprojection_error_px:.2f} px ({times})"
+    )
+    return 0
+
+
+def _localize(args: argparse.Namespace) -> int:
+    import json
+
+    import cv2
+    import numpy as np
+
+    from vlocbench.errors import LocalizationError
+    from vlocbench.loc.gallery import Gallery
+    from vlocbench.loc.localizer import MapLocalizer
+
+    localizer = MapLocalizer(args.map)
+    gallery = Gallery.load(json.loads((args.map / "map.json").read_text())["gallery"])
+    camera_name = args.camera or next(iter(gallery.cameras))
+    if camera_name not in gallery.cameras:
+        raise LocalizationError(
+            f"--camera: {camera_name!r} is not one of {sorted(gallery.cameras)}"
+        )
+    bgr = cv2.imread(str(args.image), cv2.IMREAD_COLOR)
+    if bgr is None:
+        raise LocalizationError(f"{args.image} is missing or not an image")
+    prior = None
+    if args.prior_image:
+        if args.prior_image not in gallery.names:
+            raise LocalizationError(f"--prior-image: {args.prior_image!r} is not in the gallery")
+        prior = gallery.images[gallery.index_of(args.prior_image)].world_from_cam
+    result = localizer.localize(bgr[:, :, ::-1].copy(), gallery.cameras[camera_name], prior)
+    times = ", ".join(f"{k} {1000 * v:.0f} ms" for k, v in result.seconds.items())
+    if not result.success:
+        print(f"failed: {result.reason} (retrieved {', '.join(result.retrieved)}; {times})")
+        return 1
+    assert result.world_from_cam is not None
+    with np.printoptions(precision=4, suppress=True):
+        print(f"world_from_cam =\n{result.world_from_cam}")
+    print(
+        f"{result.num_inliers} inliers of {result.num_correspondences} correspondences; "
+        f"cluster {', '.join(result.cluster)}; {times}"
+    )
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="vlocbench",
@@ -188,6 +270,33 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--oracle-sigma", type=float, default=0.1, help="oracle position noise, m")
     p.add_argument("--oracle-yaw-deg", type=float, default=1.0, help="oracle yaw noise, deg")
     p.set_defaults(func=_drive)
+
+    p = sub.add_parser("gallery", help="drive a town's route and save gallery images with poses")
+    p.add_argument("town", help="built-in town name or a town spec YAML")
+    p.add_argument("--out", type=Path, help="gallery folder (default: galleries/TOWN-kK)")
+    p.add_argument("--k", type=float, default=0.0, help="illumination level of the gallery")
+    p.add_argument("--spacing", type=float, default=2.0, help="metres between images")
+    p.add_argument("--speed", type=float, default=8.0, help="driving speed, m/s")
+    p.add_argument("--width", type=int, default=800)
+    p.add_argument("--height", type=int, default=600)
+    p.add_argument("--fov", type=float, default=90.0, help="horizontal field of view in degrees")
+    p.set_defaults(func=_gallery)
+
+    p = sub.add_parser("build-map", help="features, matches and triangulation of a gallery")
+    p.add_argument("gallery", type=Path, help="gallery folder (see `vlocbench gallery`)")
+    p.add_argument("--method", default="sift", help="sift, orb-teblid, aliked-lightglue, ...")
+    p.add_argument("--out", type=Path, help="map folder (default: maps/GALLERY/METHOD-HASH)")
+    p.add_argument("--pairs", choices=("poses", "retrieval"), default="poses")
+    p.add_argument("--num-pairs", type=int, default=25)
+    p.add_argument("--overwrite", action="store_true", help="recompute cached stages")
+    p.set_defaults(func=_build_map)
+
+    p = sub.add_parser("localize", help="localize one image against a map")
+    p.add_argument("image", type=Path)
+    p.add_argument("--map", type=Path, required=True, help="map folder")
+    p.add_argument("--camera", help="gallery camera that took the image (default: the first)")
+    p.add_argument("--prior-image", help="gallery image whose pose is the prior (pose-prior maps)")
+    p.set_defaults(func=_localize)
 
     for name, help_text, func in (
         ("tour", "render towns under every condition and write an HTML report", _tour),

@@ -37,3 +37,7 @@ class RenderBackendError(VlocbenchError, RuntimeError):
 
 class PlanningError(VlocbenchError, RuntimeError):
     """No drivable route joins the requested points on the road graph."""
+
+
+class LocalizationError(VlocbenchError, ValueError):
+    """Bad input to the localization pipeline: an image, a gallery, a cache or a map file."""

@@ -10,6 +10,7 @@ from vlocbench.geometry import invert_pose, planar_pose
 from vlocbench.sim import (
     Camera,
     Conditions,
+    Exposure,
     Extrinsics,
     Headlights,
     Illumination,
@@ -47,12 +48,30 @@ def test_same_seed_same_image_bytes(small_town, small_sim):
 
 
 def test_brightness_falls_with_k(small_sim):
+    fixed = Exposure("fixed")
     means = [
-        gray(render(small_sim, Conditions(illumination=Illumination(k=k)))).mean()
+        gray(render(small_sim, Conditions(illumination=Illumination(k=k), exposure=fixed))).mean()
         for k in (0, 3, 6, 10)
     ]
     assert all(a > b for a, b in itertools.pairwise(means)), means
     assert means[-1] < 10 < 60 < means[0]
+
+
+def test_auto_exposure_brightens_dusk_with_noise(small_sim):
+    dusk = Illumination(k=4)
+    fixed = render(small_sim, Conditions(illumination=dusk, exposure=Exposure("fixed"))).image
+    auto = render(small_sim, Conditions(illumination=dusk)).image
+    gain = auto.mean() / fixed.mean()
+    assert 2.0 < gain <= 8.0 + 1e-6
+    # the noise is amplified with the signal: flat regions get grainier
+    assert (
+        np.abs(np.diff(auto.astype(float), axis=1)).mean()
+        > gain * np.abs(np.diff(fixed.astype(float), axis=1)).mean() * 0.9
+    )
+    # a bright day needs no gain: the image is untouched
+    day = render(small_sim, Conditions(exposure=Exposure("fixed"))).image
+    assert day.mean() >= Exposure().target_mean
+    assert day.tobytes() == render(small_sim, Conditions()).image.tobytes()
 
 
 def test_contrast_falls_with_fog(small_sim):

@@ -11,6 +11,7 @@ select_backend()
 from vlocbench.sim.camera import Camera, Extrinsics, Intrinsics, gallery_camera  # noqa: E402
 from vlocbench.sim.conditions import (  # noqa: E402
     Conditions,
+    Exposure,
     Headlights,
     Illumination,
     Traffic,
@@ -25,6 +26,7 @@ __all__ = [
     "Camera",
     "Conditions",
     "Control",
+    "Exposure",
     "Extrinsics",
     "Frame",
     "Headlights",

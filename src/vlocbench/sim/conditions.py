@@ -123,6 +123,25 @@ class Headlights:
 
 
 @dataclass(frozen=True)
+class Exposure:
+    """The camera's exposure. ``auto`` (the default, as CARLA's RGB camera): a gain in
+    [1, ``max_gain``] brings the image's mean brightness up towards ``target_mean`` (0-255), and
+    sensor noise (``noise_sigma`` grey levels before the gain) grows with it; ``fixed``: gain 1, no
+    noise. Dark scenes then look dark and noisy instead of black, as from a real camera."""
+
+    mode: Literal["auto", "fixed"] = "auto"
+    target_mean: float = 64.0
+    max_gain: float = 8.0
+    noise_sigma: float = 0.8
+
+    def __post_init__(self) -> None:
+        require(self.mode in ("auto", "fixed"), "exposure.mode", "must be auto or fixed")
+        require(0 < self.target_mean < 255, "exposure.target_mean", "must be in (0, 255)")
+        require(self.max_gain >= 1, "exposure.max_gain", "must be >= 1")
+        require(self.noise_sigma >= 0, "exposure.noise_sigma", "must be >= 0")
+
+
+@dataclass(frozen=True)
 class Conditions:
     illumination: Illumination = field(default_factory=Illumination)
     weather: Weather = field(default_factory=Weather)
@@ -130,6 +149,7 @@ class Conditions:
     viewpoint: Viewpoint = field(default_factory=Viewpoint)
     traffic: Traffic = field(default_factory=Traffic)
     headlights: Headlights = field(default_factory=Headlights)
+    exposure: Exposure = field(default_factory=Exposure)
 
     def __post_init__(self) -> None:
         if self.season not in SEASONS:

@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 
 from vlocbench.sim import textures as tex
 from vlocbench.sim.backend import missing_libraries_error, select_backend
-from vlocbench.sim.conditions import Conditions
+from vlocbench.sim.conditions import Conditions, Exposure
 from vlocbench.sim.rain import apply_rain
 from vlocbench.sim.scene import (
     GROUP_COLLISION,
@@ -111,6 +111,9 @@ class Renderer:
         m.tex_data[start : start + image.size] = image.ravel()
         for r in self._renderers.values():
             self._upload_sky(r)
+        # lights are drawn from data.light_xdir/xpos, which only mj_camlight derives from the
+        # model's light_dir: without this the old sun shone until the next simulation step
+        sc.forward()
 
     def _apply_season(self, c: Conditions) -> None:
         m, sc = self.scene.model, self.scene
@@ -195,11 +198,11 @@ class Renderer:
         self._set_fog(r)
         image = r.render()
         rain = self.conditions.weather.rain
+        seed = zlib.crc32(f"{sc.town.spec.seed}:{frame_id}".encode())
         if rain > 0:
             _, _, brightness = sky_colors(self.conditions)
-            seed = zlib.crc32(f"{sc.town.spec.seed}:{frame_id}".encode())
             image = apply_rain(image, rain, brightness, np.random.default_rng(seed))
-        return image
+        return expose(image, self.conditions.exposure, np.random.default_rng(seed + 1))
 
     @staticmethod
     def _add_markers(
@@ -224,3 +227,17 @@ class Renderer:
         for r in self._renderers.values():
             r.close()
         self._renderers.clear()
+
+
+def expose(image: Image, exposure: Exposure, rng: np.random.Generator) -> Image:
+    """Auto-exposure: gain towards the target mean brightness, with gain-scaled sensor noise."""
+    if exposure.mode == "fixed":
+        return image
+    mean = float(image.mean())
+    gain = float(np.clip(exposure.target_mean / max(mean, 1e-3), 1.0, exposure.max_gain))
+    if gain == 1.0:
+        return image
+    noisy = (
+        image.astype(np.float32) + rng.normal(0.0, exposure.noise_sigma, image.shape[:2])[..., None]
+    )
+    return np.clip(noisy * gain, 0, 255).astype(np.uint8)

@@ -27,6 +27,8 @@ Array = NDArray[np.float64]
 GROUP_STATIC, GROUP_FOLIAGE_FULL, GROUP_FOLIAGE_SPARSE = 0, 1, 2
 GROUP_TRAFFIC, GROUP_COLLISION, GROUP_EGO = 3, 4, 5
 GROUND_FLOOR_M = 4.2
+SHOP_ATLAS_COLUMNS = 8
+SHOP_STRIDE = 7  # atlas step from one shop to the next along a building (coprime to most counts)
 SKY_SIZE = 64
 CAR_HALF_M = (2.3, 0.95)  # half length, half width of every car (ego, traffic, parked)
 CAR_COLORS = (
@@ -129,11 +131,15 @@ class _SceneBuilder:
             self.tiles[f"tower{s}"] = tile
             self.texture(f"tower{s}", tile.image)
             self.material(f"tower{s}", f"tower{s}", specular=0.5, shininess=0.6)
-        for s in range(6):
-            tile = tex.shopfront(s + 6 * spec.seed, GROUND_FLOOR_M, rng)
-            self.tiles[f"shop{s}"] = tile
-            self.texture(f"shop{s}", tile.image)
-            self.material(f"shop{s}", f"shop{s}", specular=0.2)
+        # every shopfront in one atlas texture: one material, one mesh, however many shops
+        shops = [
+            tex.shopfront(s + 6 * spec.seed, GROUND_FLOOR_M, rng)
+            for s in range(spec.buildings.shop_styles)
+        ]
+        self.shop_columns = min(len(shops), SHOP_ATLAS_COLUMNS)
+        self.shop_rows = -(-len(shops) // self.shop_columns)
+        self.texture("shops", tex.atlas([t.image for t in shops], self.shop_columns))
+        self.material("shops", "shops", specular=0.2)
         road = tex.road_tile(spec.road.lane_width_m, 12.0, rng)
         self.texture("road", road)
         self.texture("road_winter", tex.snowy_road(road, rng))
@@ -294,7 +300,7 @@ class _SceneBuilder:
                 p.corner_radius_m,
                 h,
                 self.options.cell_m,
-                2.0,
+                tex.PAVING_TILE_M,
             )
             for rect in _slab_boxes(p.rect, p.corner_radius_m):
                 bx0, by0, bx1, by1 = rect
@@ -304,6 +310,24 @@ class _SceneBuilder:
                 )
         for rect in self.town.grass:
             self.flat("grass", rect, h + 0.01, 4.0)
+
+    def shopfronts(self, origin: Array, u: Array, length_m: float, first: int) -> None:
+        """A row of shops along a ground floor: atlas tiles ``first``, ``first + stride``, ...
+
+        Neighbouring shops differ and so does the sequence from one building to the next, so
+        that no stretch of street repeats another (a tile alone may recur across town).
+        """
+        count = self.town.spec.buildings.shop_styles
+        n = max(1, round(length_m / tex.SHOP_WIDTH_M))
+        seg = length_m / n
+        cols, rows = self.shop_columns, self.shop_rows
+        for j in range(n):
+            r, c = divmod((first + j * SHOP_STRIDE) % count, cols)
+            self.meshes["shops"].quad(
+                origin + u * (j * seg), u, np.array([0.0, 0, 1]), seg, GROUND_FLOOR_M,
+                (c / cols, (r + 1) / rows), (1 / (cols * seg), -1 / (rows * GROUND_FLOOR_M)),
+                self.options.cell_m,
+            )  # fmt: skip
 
     def buildings(self) -> None:
         cell = self.options.cell_m
@@ -324,17 +348,7 @@ class _SceneBuilder:
                 u = (c - a) / length
                 z0 = 0.0
                 if b.shop >= 0 and sides[s] == b.front:
-                    shop = self.tiles[f"shop{b.shop}"]
-                    self.meshes[f"shop{b.shop}"].quad(
-                        a,
-                        u,
-                        up,
-                        length,
-                        GROUND_FLOOR_M,
-                        (0.0, 1.0),
-                        (1 / shop.width_m, -1 / shop.height_m),
-                        cell,
-                    )
+                    self.shopfronts(a, u, length, b.shop)
                     z0 = GROUND_FLOOR_M
                 low = min(b.height_m, 12.0) - z0  # lower walls: fine cells for headlights
                 kv = -1 / tile.height_m

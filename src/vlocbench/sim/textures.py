@@ -149,9 +149,12 @@ def _weathering(img: NDArray, rng: np.random.Generator, base: NDArray) -> None:
         cv2.rectangle(img, (x - 6, y), (x + 6, y + 6), _rgb(base * 0.4), -1)
 
 
+SHOP_WIDTH_M = 7.0  # every shopfront tile covers this much wall (they share one atlas)
+
+
 def shopfront(style: int, height_m: float, rng: np.random.Generator) -> FacadeTile:
     """Ground-floor tile: a shop window, a door and a sign band with the shop's name."""
-    width_m = float(rng.uniform(6.0, 9.0))
+    width_m = SHOP_WIDTH_M
     w, h = round(width_m * PX_PER_M), round(height_m * PX_PER_M)
     wall = rng.uniform(60, 200, 3)
     img = np.ones((h, w, 3), np.float32) * wall + noise((h, w), rng, 20, 10)[..., None]
@@ -228,28 +231,31 @@ def crosswalk_tile(rng: np.random.Generator) -> Image:
     return _finish(img, rng, 4)
 
 
+PAVING_TILE_M = 16.0  # the paving texture repeats only every 16 m
+
+
 def paving(rng: np.random.Generator, snow: float = 0.0) -> Image:
-    """Sidewalk slabs (a 2 m x 2 m tile), optionally covered by snow in [0, 1]."""
-    size = 256
+    """Sidewalk slabs of 0.5 m over a 16 m x 16 m tile, optionally covered by snow in [0, 1].
+
+    Every slab has its own shade and few, faint spots: a short-period, high-contrast pattern
+    would be the same everywhere in town, and a localizer would match the ground of one street
+    to the ground of another.
+    """
+    px_per_m = 64
+    size = round(PAVING_TILE_M * px_per_m)
     base = rng.uniform(165, 195)
     img = np.ones((size, size, 3), np.float32) * np.array([base, base * 0.97, base * 0.92])
-    img += noise((size, size), rng, 12, 12)[..., None]
-    slab = size // 4
-    for i in range(4):
-        for j in range(4):
-            img[i * slab : (i + 1) * slab, j * slab : (j + 1) * slab] *= rng.uniform(0.85, 1.12)
-    for _ in range(60):  # pebbles and chewing gum
+    img += noise((size, size), rng, 24, 8)[..., None]
+    slab = px_per_m // 2
+    shades = rng.uniform(0.9, 1.08, (size // slab, size // slab))
+    img *= np.kron(shades, np.ones((slab, slab)))[..., None]
+    for _ in range(400):  # pebbles and chewing gum
         x, y = rng.integers(0, size, 2)
-        cv2.circle(
-            img,
-            (int(x), int(y)),
-            int(rng.integers(1, 4)),
-            _rgb((base * rng.uniform(0.4, 1.3),) * 3),
-            -1,
-        )
+        shade = (base * rng.uniform(0.6, 1.15),) * 3
+        cv2.circle(img, (int(x), int(y)), int(rng.integers(1, 4)), _rgb(shade), -1)
     for k in range(0, size, slab):
-        cv2.line(img, (k, 0), (k, size), (110, 105, 100), 2)
-        cv2.line(img, (0, k), (size, k), (110, 105, 100), 2)
+        cv2.line(img, (k, 0), (k, size), (140, 135, 130), 2)
+        cv2.line(img, (0, k), (size, k), (140, 135, 130), 2)
     return _snow(_finish(img, rng), rng, snow)
 
 
@@ -359,3 +365,14 @@ def sky(
     faces = [side, side, side, side, np.broadcast_to(zen, (size, size, 3)), np.broadcast_to(
         hor, (size, size, 3))]  # fmt: skip
     return np.clip(np.concatenate(faces, axis=0), 0, 255).astype(np.uint8)
+
+
+def atlas(tiles: list[Image], columns: int) -> Image:
+    """Equal-sized tiles in a grid, row by row from the top left."""
+    h, w = tiles[0].shape[:2]
+    rows = -(-len(tiles) // columns)
+    out = np.zeros((rows * h, columns * w, 3), np.uint8)
+    for k, tile in enumerate(tiles):
+        r, c = divmod(k, columns)
+        out[r * h : (r + 1) * h, c * w : (c + 1) * w] = tile
+    return out

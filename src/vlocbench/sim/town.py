@@ -52,6 +52,8 @@ class BuildingSpec:
     tower_floors: tuple[int, int] = (15, 40)
     facade_styles: int = 12  # distinct facade textures; few styles = repetitive, aliasing facades
     shop_probability: float = 0.6
+    # distinct shopfront tiles; few make streets look alike to a localizer (town10 keeps 6)
+    shop_styles: int = 6
 
     def __post_init__(self) -> None:
         for name in ("floors", "frontage_m", "depth_m", "tower_floors"):
@@ -68,6 +70,7 @@ class BuildingSpec:
         )
         require(1 <= self.facade_styles <= 32, "buildings.facade_styles", "must be in [1, 32]")
         require(0 <= self.shop_probability <= 1, "buildings.shop_probability", "must be in [0, 1]")
+        require(1 <= self.shop_styles <= 64, "buildings.shop_styles", "must be in [1, 64]")
 
 
 @dataclass(frozen=True)
@@ -328,7 +331,11 @@ class _Builder:
         height = floors * bs.floor_height_m + 0.6  # parapet
         n_styles = bs.facade_styles
         facade = int(self.rng.integers(0, n_styles))
-        shop = int(self.rng.integers(0, 6)) if self.rng.random() < bs.shop_probability else -1
+        shop = (
+            int(self.rng.integers(0, bs.shop_styles))
+            if self.rng.random() < bs.shop_probability
+            else -1
+        )
         self.buildings.append(
             Building(rect, height, floors, facade, int(self.rng.integers(0, 3)), shop, front, tower)
         )

@@ -1,0 +1,123 @@
+"""Local features: keypoints and descriptors of one image.
+
+Every extractor takes an (H, W, 3) uint8 RGB image and returns :class:`Features` with keypoints in
+OpenCV pixel coordinates (pixel centres at integers). Classic extractors run on OpenCV; learned ones
+live in :mod:`vlocbench.loc.learned` (PyTorch, imported only when used).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from vlocbench.errors import LocalizationError
+
+
+@dataclass(frozen=True)
+class Features:
+    """``keypoints`` (N, 2) float32 x, y px; ``descriptors`` (N, D) float32 or uint8 (binary);
+    ``scores`` (N,) float32, higher is better."""
+
+    keypoints: NDArray[np.float32]
+    descriptors: NDArray
+    scores: NDArray[np.float32]
+
+    def __len__(self) -> int:
+        return len(self.keypoints)
+
+    def subset(self, index: NDArray) -> Features:
+        return Features(self.keypoints[index], self.descriptors[index], self.scores[index])
+
+    @classmethod
+    def empty(cls, dim: int, dtype: type = np.float32) -> Features:
+        return cls(np.zeros((0, 2), np.float32), np.zeros((0, dim), dtype), np.zeros(0, np.float32))
+
+
+@runtime_checkable
+class FeatureExtractor(Protocol):
+    """What the pipeline needs of a local feature method."""
+
+    name: str
+    binary: bool  # descriptors are packed bits (matched by Hamming distance)
+
+    def extract(self, image: NDArray[np.uint8]) -> Features: ...
+
+
+def check_image(image: object, what: str = "image") -> NDArray[np.uint8]:
+    """``image`` as a contiguous (H, W, 3) uint8 RGB array, or a LocalizationError saying why not."""
+    if not isinstance(image, np.ndarray):
+        raise LocalizationError(f"{what}: expected a numpy array, got {type(image).__name__}")
+    if image.dtype != np.uint8:
+        raise LocalizationError(f"{what}: expected uint8 pixels, got {image.dtype}")
+    if image.ndim != 3 or image.shape[2] != 3:
+        raise LocalizationError(f"{what}: expected (H, W, 3) RGB, got shape {image.shape}")
+    if min(image.shape[:2]) < 16:
+        raise LocalizationError(f"{what}: {image.shape[1]}x{image.shape[0]} is too small")
+    return np.ascontiguousarray(image)
+
+
+def _gray(image: NDArray[np.uint8]) -> NDArray[np.uint8]:
+    return cv2.cvtColor(check_image(image), cv2.COLOR_RGB2GRAY)
+
+
+def _strongest(kps: tuple[cv2.KeyPoint, ...], n: int) -> NDArray[np.int64]:
+    """Indices of the ``n`` strongest keypoints by response, ties broken by position, so the
+    selection does not depend on OpenCV's internal order."""
+    if not kps:
+        return np.zeros(0, np.int64)
+    a = np.array([(k.response, k.pt[1], k.pt[0]) for k in kps])
+    return np.lexsort((a[:, 2], a[:, 1], -a[:, 0]))[:n]
+
+
+class SiftExtractor:
+    """OpenCV SIFT, the strongest ``max_keypoints`` by response; RootSIFT descriptors optional."""
+
+    binary = False
+
+    def __init__(self, max_keypoints: int = 2048, root: bool = True, name: str = "sift") -> None:
+        self.name, self.max_keypoints, self.root = name, max_keypoints, root
+        self._sift = cv2.SIFT_create()
+
+    def extract(self, image: NDArray[np.uint8]) -> Features:
+        kps, desc = self._sift.detectAndCompute(_gray(image), None)  # one scale space for both
+        keep = _strongest(kps, self.max_keypoints)
+        if not len(keep):
+            return Features.empty(128)
+        kps = [kps[i] for i in keep]
+        desc = desc[keep].astype(np.float32)
+        if self.root:  # RootSIFT: L1-normalize, square root (Hellinger kernel)
+            desc /= np.maximum(desc.sum(axis=1, keepdims=True), 1e-8)
+            desc = np.sqrt(desc)
+        pts = np.array([k.pt for k in kps], dtype=np.float32)
+        return Features(pts, desc, np.array([k.response for k in kps], dtype=np.float32))
+
+
+class OrbTeblidExtractor:
+    """ORB keypoints (FAST + Harris) described by TEBLID, a learned binary descriptor (256 bits)."""
+
+    binary = True
+
+    def __init__(self, max_keypoints: int = 2048, name: str = "orb-teblid") -> None:
+        self.name, self.max_keypoints = name, max_keypoints
+        self._orb = cv2.ORB_create(
+            nfeatures=max_keypoints, scaleFactor=1.2, nlevels=8, fastThreshold=10
+        )
+        self._teblid = cv2.xfeatures2d.TEBLID_create(1.0, cv2.xfeatures2d.TEBLID_SIZE_256_BITS)
+
+    def extract(self, image: NDArray[np.uint8]) -> Features:
+        gray = _gray(image)
+        detected = self._orb.detect(gray, None)
+        kps = [detected[i] for i in _strongest(detected, self.max_keypoints)]
+        if not kps:
+            return Features.empty(32, np.uint8)
+        kps, desc = self._teblid.compute(gray, kps)
+        if desc is None or not kps:
+            return Features.empty(32, np.uint8)
+        pts = np.array([k.pt for k in kps], dtype=np.float32)
+        return Features(
+            pts, desc.astype(np.uint8), np.array([k.response for k in kps], dtype=np.float32)
+        )

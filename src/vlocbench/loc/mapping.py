@@ -1,0 +1,326 @@
+"""Maps: a gallery's features, matches and 3D points triangulated from its known camera poses.
+
+``build_map`` runs the stages hloc-style, each cached in the map folder and recomputed only when
+missing (or with ``overwrite``):
+
+    features.h5   local features per gallery image (keyed by image name)
+    global.h5     global descriptors per image, retrieval.npz what the descriptor learned
+    pairs.txt     mapping pairs: the nearest gallery poses (default) or the top retrievals
+    matches.h5    matches per pair, filtered by the epipolar geometry of the known poses
+    database.db, sfm/   the COLMAP database and model (pycolmap ``triangulate_points``)
+    map.json      method, gallery, statistics and stage times
+
+A map is keyed by (gallery, method, configuration): :func:`default_map_dir` names its folder so.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pycolmap
+
+from vlocbench.config import config_hash, require
+from vlocbench.errors import LocalizationError
+from vlocbench.loc.features import Features
+from vlocbench.loc.gallery import CameraModel, Gallery
+from vlocbench.loc.registry import MethodConf, build_features, build_matcher, build_retrieval
+from vlocbench.loc.retrieval import nearest_poses, top_k
+
+MAP_FILE = "map.json"
+Progress = Callable[[str, int, int], None]  # stage, done, total
+
+
+@dataclass(frozen=True)
+class MappingConfig:
+    pairs: str = "poses"  # "poses" (nearest gallery cameras) or "retrieval" (top global matches)
+    num_pairs: int = 25
+    epipolar_max_px: float = 4.0  # Sampson distance bound of a match under the known poses
+    min_triangulation_angle_deg: float = 1.5
+
+    def __post_init__(self) -> None:
+        require(self.pairs in ("poses", "retrieval"), "mapping.pairs", "must be poses or retrieval")
+        require(self.num_pairs >= 1, "mapping.num_pairs", "must be >= 1")
+        require(self.epipolar_max_px > 0, "mapping.epipolar_max_px", "must be > 0")
+
+
+@dataclass(frozen=True)
+class MapReport:
+    images: int
+    pairs: int
+    points: int
+    mean_track_length: float
+    mean_reprojection_error_px: float
+    seconds: dict[str, float] = field(default_factory=dict)
+
+
+def default_map_dir(root: str | Path, gallery: Gallery, method: str, conf: MethodConf,
+                    mapping: MappingConfig) -> Path:  # fmt: skip
+    """``root/GALLERY-ID/METHOD-HASH``: one folder per (gallery, method, configuration)."""
+    return Path(root) / gallery.identity / f"{method}-{config_hash((conf, mapping), 8)}"
+
+
+# -- HDF5 caches ---------------------------------------------------------------------------------
+class FeatureStore:
+    """Features per image name in an HDF5 file."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+
+    def _open(self, mode: str) -> h5py.File:
+        try:
+            return h5py.File(self.path, mode)
+        except OSError as exc:
+            raise LocalizationError(
+                f"{self.path} is corrupt ({exc}); delete it or rebuild with overwrite"
+            ) from None
+
+    def names(self) -> set[str]:
+        if not self.path.exists():
+            return set()
+        with self._open("r") as f:
+            return set(f.keys())
+
+    def write(self, items: Iterator[tuple[str, Features]]) -> None:
+        with self._open("a") as f:
+            for name, feats in items:
+                if name in f:
+                    del f[name]
+                g = f.create_group(name)
+                g["keypoints"], g["descriptors"], g["scores"] = (
+                    feats.keypoints, feats.descriptors, feats.scores,
+                )  # fmt: skip
+                f.flush()
+
+    def read(self, name: str) -> Features:
+        with self._open("r") as f:
+            return self._get(f, name)
+
+    def read_all(self, names: list[str]) -> list[Features]:
+        with self._open("r") as f:
+            return [self._get(f, n) for n in names]
+
+    def _get(self, f: h5py.File, name: str) -> Features:
+        try:
+            g = f[name]
+            return Features(g["keypoints"][()], g["descriptors"][()], g["scores"][()])
+        except KeyError:
+            raise LocalizationError(f"{self.path} has no features for {name!r}") from None
+
+
+def _pair_key(a: str, b: str) -> str:
+    return f"{a}|{b}".replace("/", "\\")
+
+
+# -- geometry ------------------------------------------------------------------------------------
+def _fundamental(
+    cam_a: CameraModel, pose_a: np.ndarray, cam_b: CameraModel, pose_b: np.ndarray
+) -> np.ndarray:
+    """F with x_b^T F x_a = 0 for OpenCV pixel coordinates, from world_from_cam poses."""
+    b_from_a = np.linalg.inv(pose_b) @ pose_a
+    R, t = b_from_a[:3, :3], b_from_a[:3, 3]
+    tx = np.array([[0, -t[2], t[1]], [t[2], 0, -t[0]], [-t[1], t[0], 0]])
+    return np.linalg.inv(cam_b.K).T @ tx @ R @ np.linalg.inv(cam_a.K)
+
+
+def sampson_px(F: np.ndarray, xa: np.ndarray, xb: np.ndarray) -> np.ndarray:
+    """Sampson distance (px) of correspondences (M, 2) under F."""
+    ha = np.hstack([xa, np.ones((len(xa), 1))])
+    hb = np.hstack([xb, np.ones((len(xb), 1))])
+    Fa, Ftb = ha @ F.T, hb @ F
+    num = np.einsum("ij,ij->i", hb, Fa) ** 2
+    den = Fa[:, 0] ** 2 + Fa[:, 1] ** 2 + Ftb[:, 0] ** 2 + Ftb[:, 1] ** 2
+    return np.sqrt(num / np.maximum(den, 1e-12))
+
+
+def colmap_camera(cam: CameraModel, camera_id: int) -> pycolmap.Camera:
+    """COLMAP's pixel centres sit at +0.5: the principal point moves by half a pixel."""
+    K = cam.K
+    return pycolmap.Camera(
+        model="PINHOLE", width=cam.width, height=cam.height, camera_id=camera_id,
+        params=[K[0, 0], K[1, 1], K[0, 2] + 0.5, K[1, 2] + 0.5],
+    )  # fmt: skip
+
+
+def cam_from_world_rigid(world_from_cam: np.ndarray) -> pycolmap.Rigid3d:
+    return pycolmap.Rigid3d(np.linalg.inv(world_from_cam)[:3, :4])
+
+
+# -- the pipeline --------------------------------------------------------------------------------
+def _extract(gallery: Gallery, conf: MethodConf, store: FeatureStore, overwrite: bool,
+             progress: Progress | None) -> None:  # fmt: skip
+    todo = gallery.names if overwrite else [n for n in gallery.names if n not in store.names()]
+    if not todo:
+        return
+    extractor = build_features(conf.features)
+
+    def items() -> Iterator[tuple[str, Features]]:
+        for k, name in enumerate(todo):
+            yield name, extractor.extract(gallery.load_image(name))
+            if progress:
+                progress("features", k + 1, len(todo))
+
+    store.write(items())
+
+
+def _global(gallery: Gallery, conf: MethodConf, out: Path, features: FeatureStore,
+            overwrite: bool) -> np.ndarray | None:  # fmt: skip
+    """(N, D) global descriptors of the gallery, or None for pose-prior retrieval."""
+    descriptor = build_retrieval(conf.retrieval)
+    if descriptor is None:
+        return None
+    state_path, store_path = out / "retrieval.npz", out / "global.h5"
+    if overwrite or not state_path.exists():
+        descriptor.fit(features.read_all(gallery.names))
+        np.savez(state_path, **descriptor.state())
+        store_path.unlink(missing_ok=True)
+    else:
+        with np.load(state_path) as state:
+            descriptor.load_state(dict(state))
+    with h5py.File(store_path, "a") as f:
+        for name in gallery.names:
+            if name not in f:
+                f[name] = descriptor.describe(gallery.load_image(name), features.read(name))
+        return np.stack([f[n][()] for n in gallery.names])
+
+
+def _pairs(
+    gallery: Gallery, mapping: MappingConfig, descriptors: np.ndarray | None
+) -> list[tuple[str, str]]:
+    poses = np.stack([im.world_from_cam for im in gallery.images])
+    seen: set[tuple[int, int]] = set()
+    for i in range(len(gallery)):
+        if mapping.pairs == "retrieval" and descriptors is not None:
+            near = top_k(descriptors[i], descriptors, mapping.num_pairs + 1)
+        else:
+            near = nearest_poses(poses, poses[i], mapping.num_pairs + 1)
+        seen |= {(min(i, j), max(i, j)) for j in near if j != i}
+    names = gallery.names
+    return [(names[i], names[j]) for i, j in sorted(seen)]
+
+
+def _match(gallery: Gallery, conf: MethodConf, mapping: MappingConfig, features: FeatureStore,
+           pairs: list[tuple[str, str]], path: Path, progress: Progress | None) -> dict[tuple[str, str], np.ndarray]:  # fmt: skip
+    matcher = None
+    out: dict[tuple[str, str], np.ndarray] = {}
+    with h5py.File(path, "a") as f:
+        for k, (a, b) in enumerate(pairs):
+            key = _pair_key(a, b)
+            if key not in f:
+                matcher = matcher or build_matcher(conf.matcher)
+                fa, fb = features.read(a), features.read(b)
+                m = matcher.match(fa, fb)
+                if len(m):
+                    ia, ib = (
+                        gallery.images[gallery.index_of(a)],
+                        gallery.images[gallery.index_of(b)],
+                    )
+                    F = _fundamental(gallery.cameras[ia.camera], ia.world_from_cam,
+                                     gallery.cameras[ib.camera], ib.world_from_cam)  # fmt: skip
+                    m = m[
+                        sampson_px(F, fa.keypoints[m[:, 0]], fb.keypoints[m[:, 1]])
+                        < mapping.epipolar_max_px
+                    ]
+                f[key] = m.astype(np.uint32).reshape(-1, 2)
+                if progress:
+                    progress("matches", k + 1, len(pairs))
+            out[(a, b)] = f[key][()]
+    return out
+
+
+def _triangulate(gallery: Gallery, mapping: MappingConfig, features: FeatureStore,
+                 matches: dict[tuple[str, str], np.ndarray], out: Path) -> pycolmap.Reconstruction:  # fmt: skip
+    rec = pycolmap.Reconstruction()
+    cam_ids = {name: k + 1 for k, name in enumerate(gallery.cameras)}
+    for name, cam in gallery.cameras.items():
+        rec.add_camera_with_trivial_rig(colmap_camera(cam, cam_ids[name]))
+    ids = {}
+    for k, im in enumerate(gallery.images):
+        image = pycolmap.Image(name=im.name, camera_id=cam_ids[im.camera], image_id=k + 1)
+        rec.add_image_with_trivial_frame(image, cam_from_world_rigid(im.world_from_cam))
+        ids[im.name] = k + 1
+    db_path = out / "database.db"
+    db_path.unlink(missing_ok=True)
+    db = pycolmap.Database.open(db_path)
+    for name in gallery.cameras:
+        db.write_camera(rec.cameras[cam_ids[name]], use_camera_id=True)
+    for rig in rec.rigs.values():
+        db.write_rig(rig, use_rig_id=True)
+    for frame in rec.frames.values():
+        db.write_frame(frame, use_frame_id=True)
+    for name, image_id in ids.items():
+        db.write_image(rec.images[image_id], use_image_id=True)
+        db.write_keypoints(image_id, features.read(name).keypoints.astype(np.float32) + 0.5)
+    for (a, b), m in matches.items():
+        if len(m):
+            db.write_matches(ids[a], ids[b], m)
+            geometry = pycolmap.TwoViewGeometry()
+            geometry.inlier_matches = m
+            geometry.config = pycolmap.TwoViewGeometryConfiguration.CALIBRATED
+            db.write_two_view_geometry(ids[a], ids[b], geometry)
+    db.close()
+    options = pycolmap.IncrementalPipelineOptions()
+    options.triangulation.min_angle = mapping.min_triangulation_angle_deg
+    sfm = out / "sfm"
+    shutil.rmtree(sfm, ignore_errors=True)
+    sfm.mkdir()
+    return pycolmap.triangulate_points(rec, db_path, gallery.root / "images", sfm, options=options)
+
+
+def build_map(
+    gallery: Gallery,
+    conf: MethodConf,
+    out_dir: str | Path,
+    mapping: MappingConfig | None = None,
+    overwrite: bool = False,
+    progress: Progress | None = None,
+) -> MapReport:
+    """Build (or finish building) the map of ``gallery`` with method ``conf`` in ``out_dir``."""
+    mapping = mapping or MappingConfig()
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    pycolmap.logging.minloglevel = 2
+    seconds = {}
+    t = time.perf_counter()
+    features = FeatureStore(out / "features.h5")
+    _extract(gallery, conf, features, overwrite, progress)
+    seconds["features"] = time.perf_counter() - t
+    t = time.perf_counter()
+    descriptors = _global(gallery, conf, out, features, overwrite)
+    seconds["global"] = time.perf_counter() - t
+    t = time.perf_counter()
+    pairs = _pairs(gallery, mapping, descriptors)
+    (out / "pairs.txt").write_text("".join(f"{a} {b}\n" for a, b in pairs))
+    if overwrite:
+        (out / "matches.h5").unlink(missing_ok=True)
+    matches = _match(gallery, conf, mapping, features, pairs, out / "matches.h5", progress)
+    seconds["matching"] = time.perf_counter() - t
+    t = time.perf_counter()
+    rec = _triangulate(gallery, mapping, features, matches, out)
+    seconds["triangulation"] = time.perf_counter() - t
+    report = MapReport(
+        images=len(gallery),
+        pairs=len(pairs),
+        points=rec.num_points3D(),
+        mean_track_length=float(rec.compute_mean_track_length()) if rec.num_points3D() else 0.0,
+        mean_reprojection_error_px=float(rec.compute_mean_reprojection_error()),
+        seconds=seconds,
+    )
+    info = {
+        "version": 1,
+        "gallery": str(gallery.root.resolve()),
+        "gallery_identity": gallery.identity,
+        "method": asdict(conf),
+        "mapping": asdict(mapping),
+        "report": asdict(report),
+    }
+    tmp = out / (MAP_FILE + ".tmp")
+    tmp.write_text(json.dumps(info, indent=1))
+    tmp.replace(out / MAP_FILE)
+    return report

@@ -1,0 +1,45 @@
+"""Local feature matching: nearest neighbours with Lowe's ratio test, mutual (OpenCV brute force)."""
+
+from __future__ import annotations
+
+from typing import Protocol, runtime_checkable
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from vlocbench.loc.features import Features
+
+
+@runtime_checkable
+class Matcher(Protocol):
+    """Matches two images' features: (M, 2) int index pairs (first image, second image)."""
+
+    name: str
+
+    def match(self, a: Features, b: Features) -> NDArray[np.int64]: ...
+
+
+class MutualNearestNeighbor:
+    """Keep a -> b nearest neighbours that pass the ratio test and are b's nearest neighbour too.
+
+    ``hamming`` matches binary descriptors; otherwise L2 on float descriptors.
+    """
+
+    def __init__(self, ratio: float = 0.8, hamming: bool = False, name: str = "nn-ratio") -> None:
+        self.name, self.ratio = name, ratio
+        self._bf = cv2.BFMatcher(cv2.NORM_HAMMING if hamming else cv2.NORM_L2)
+
+    def match(self, a: Features, b: Features) -> NDArray[np.int64]:
+        if len(a) < 2 or len(b) < 2:
+            return np.zeros((0, 2), np.int64)
+        forward = self._bf.knnMatch(a.descriptors, b.descriptors, k=2)
+        best_a = np.array([m[0].trainIdx for m in forward])
+        d1 = np.array([m[0].distance for m in forward])
+        d2 = np.array([m[1].distance for m in forward])
+        backward = self._bf.match(b.descriptors, a.descriptors)
+        best_b = np.full(len(b), -1)
+        best_b[[m.queryIdx for m in backward]] = [m.trainIdx for m in backward]
+        idx_a = np.arange(len(a))
+        keep = (d1 < self.ratio * d2) & (best_b[best_a] == idx_a)
+        return np.stack([idx_a[keep], best_a[keep]], axis=1).astype(np.int64)

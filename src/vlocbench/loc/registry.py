@@ -1,0 +1,104 @@
+"""Named presets of every localization stage (hloc's ``confs`` style), and plugins by dotted path.
+
+A stage is named by a preset (``sift``, ``nn-ratio``, ``vlad``, ...) or by the dotted path of a
+user's class, ``package.module:Class`` (or ``package.module.Class``), built with no arguments.
+Presets import their module only when used, so the classic methods never import PyTorch.
+"""
+
+from __future__ import annotations
+
+import importlib
+from dataclasses import dataclass
+from typing import Any
+
+from vlocbench.config import require
+from vlocbench.errors import ConfigError, UnknownNameError
+from vlocbench.loc.features import FeatureExtractor
+from vlocbench.loc.matchers import Matcher
+from vlocbench.loc.retrieval import GlobalDescriptor
+
+POSE_PRIOR = "pose-prior"  # retrieval by the prior pose: no global descriptor
+
+FEATURES: dict[str, tuple[str, dict[str, Any]]] = {
+    "sift": ("vlocbench.loc.features:SiftExtractor", {"max_keypoints": 2048}),
+    "orb-teblid": ("vlocbench.loc.features:OrbTeblidExtractor", {"max_keypoints": 2048}),
+    "aliked": ("vlocbench.loc.learned:AlikedExtractor", {"max_keypoints": 1024}),
+    "disk": ("vlocbench.loc.learned:DiskExtractor", {"max_keypoints": 1024}),
+}
+MATCHERS: dict[str, tuple[str, dict[str, Any]]] = {
+    "nn-ratio": ("vlocbench.loc.matchers:MutualNearestNeighbor", {"ratio": 0.8}),
+    "nn-hamming": ("vlocbench.loc.matchers:MutualNearestNeighbor", {"ratio": 0.8, "hamming": True}),
+    "lightglue-aliked": ("vlocbench.loc.learned:LightGlueMatcher", {"features": "aliked"}),
+    "lightglue-disk": ("vlocbench.loc.learned:LightGlueMatcher", {"features": "disk"}),
+}
+RETRIEVAL: dict[str, tuple[str, dict[str, Any]]] = {
+    "vlad": ("vlocbench.loc.retrieval:Vlad", {"clusters": 64}),
+    "effnet-gem": ("vlocbench.loc.learned:EfficientNetGem", {}),
+}
+
+
+@dataclass(frozen=True)
+class MethodConf:
+    """A localization method: local features, their matcher and the retrieval stage."""
+
+    features: str
+    matcher: str
+    retrieval: str = "vlad"
+
+    def __post_init__(self) -> None:
+        for field in ("features", "matcher", "retrieval"):
+            require(bool(getattr(self, field)), f"method.{field}", "must not be empty")
+
+
+METHODS: dict[str, MethodConf] = {
+    "sift": MethodConf("sift", "nn-ratio", "effnet-gem"),
+    "sift-vlad": MethodConf("sift", "nn-ratio", "vlad"),  # no PyTorch at all
+    "orb-teblid": MethodConf("orb-teblid", "nn-hamming", "vlad"),
+    "aliked-lightglue": MethodConf("aliked", "lightglue-aliked", "effnet-gem"),
+    "disk-lightglue": MethodConf("disk", "lightglue-disk", "effnet-gem"),
+}
+
+
+def method_conf(name: str) -> MethodConf:
+    """The preset method ``name`` (see ``METHODS``)."""
+    if name not in METHODS:
+        raise UnknownNameError("method", name, METHODS)
+    return METHODS[name]
+
+
+def _load(target: str, kind: str) -> type:
+    module, _, attr = target.partition(":") if ":" in target else target.rpartition(".")
+    try:
+        return getattr(importlib.import_module(module), attr)
+    except (ImportError, AttributeError) as exc:
+        raise ConfigError(kind, f"cannot load {target!r}: {exc}") from None
+
+
+def _build(
+    kind: str, name: str, presets: dict[str, tuple[str, dict[str, Any]]], protocol: type
+) -> Any:
+    if name in presets:
+        target, kwargs = presets[name]
+        obj = _load(target, kind)(name=name, **kwargs)
+    elif "." in name or ":" in name:
+        obj = _load(name, kind)()
+    else:
+        raise UnknownNameError(kind, name, [*presets, "or a dotted path package.module:Class"])
+    if not isinstance(obj, protocol):
+        raise ConfigError(kind, f"{name!r} does not implement {protocol.__name__}")
+    return obj
+
+
+def build_features(name: str) -> FeatureExtractor:
+    return _build("features", name, FEATURES, FeatureExtractor)
+
+
+def build_matcher(name: str) -> Matcher:
+    return _build("matcher", name, MATCHERS, Matcher)
+
+
+def build_retrieval(name: str) -> GlobalDescriptor | None:
+    """The global descriptor ``name``; ``None`` for pose-prior retrieval."""
+    if name == POSE_PRIOR:
+        return None
+    return _build("retrieval", name, RETRIEVAL, GlobalDescriptor)

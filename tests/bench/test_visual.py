@@ -1,0 +1,23 @@
+import numpy as np
+
+from tests.conftest import CAMERA
+from vlocbench.bench import EpisodeConfig, run_episode
+from vlocbench.bench.visual import VisualLocalizer
+from vlocbench.sim import Simulator
+
+
+def test_visual_localizer_in_a_ground_truth_episode(small_town, stretch, sift_map):
+    localizer = VisualLocalizer(sift_map[0], (CAMERA,), name="sift")
+    sim = Simulator(small_town)
+    r = run_episode(sim, stretch, localizer, EpisodeConfig(mode="ground_truth"))
+    sim.close()
+    assert r.completed and r.localizer == "sift"
+    recs = r.localizations
+    assert len(recs) >= 25
+    pos = np.array([x.position_error_m for x in recs if x.success])
+    assert len(pos) >= 0.9 * len(recs)
+    assert np.median(pos) < 0.1
+    assert np.mean(pos < 0.5) > 0.8
+    assert all(x.compute_time_s > 0 for x in recs)
+    # the vehicle pose comes through the camera's mounting: the yaw is the car's, not the camera's
+    assert np.median([x.yaw_error_deg for x in recs if x.success]) < 1.0

@@ -1,0 +1,120 @@
+import json
+
+import numpy as np
+import pytest
+
+from tests.conftest import CAMERA, query_pose
+from vlocbench.bench.visual import camera_model
+from vlocbench.errors import LocalizationError
+from vlocbench.loc.localizer import LocalizerConfig, MapLocalizer
+from vlocbench.sim import Simulator
+
+
+@pytest.fixture(scope="module")
+def sim(small_town):
+    s = Simulator(small_town)
+    yield s
+    s.close()
+
+
+def _render(sim, pose):
+    sim.teleport(*pose)
+    return sim.render([CAMERA])[0]
+
+
+def _errors(world_from_cam, truth):
+    dt = float(np.linalg.norm(world_from_cam[:3, 3] - truth[:3, 3]))
+    R = world_from_cam[:3, :3].T @ truth[:3, :3]
+    return dt, float(np.degrees(np.arccos(np.clip((np.trace(R) - 1) / 2, -1, 1))))
+
+
+def test_map_is_triangulated_from_the_known_poses(gallery, sift_map):
+    _, report = sift_map
+    assert report.images == len(gallery) >= 25
+    assert report.points > 500
+    assert report.mean_track_length > 2.5
+    assert report.mean_reprojection_error_px < 1.0
+
+
+def test_query_between_gallery_images_is_localized(sim, stretch, sift_map):
+    localizer = MapLocalizer(sift_map[0])
+    for index in (8, 24):  # mid-block (at crossings the camera sees only distant facades)
+        frame = _render(sim, query_pose(stretch, index))
+        result = localizer.localize(frame.image, camera_model(CAMERA))
+        assert result.success, result.reason
+        dt, dr = _errors(result.world_from_cam, frame.world_from_cam)
+        assert dt < 0.25 and dr < 2.0
+        assert result.num_inliers >= 30
+        assert set(result.seconds) == {"features", "retrieval", "matching", "pnp"}
+        # retrieval returns neighbours: gallery images taken within 6 m of the query
+        gallery_xy = {m.name: m.world_from_cam[:3, 3] for m in localizer.images}
+        near = [
+            np.linalg.norm(gallery_xy[n] - frame.world_from_cam[:3, 3]) for n in result.retrieved
+        ]
+        assert min(near) < 3.0 and sum(d < 6.0 for d in near) >= 3
+
+
+def test_unmapped_place_and_featureless_image_fail_cleanly(sim, small_town, sift_map):
+    localizer = MapLocalizer(sift_map[0])
+    black = np.zeros((240, 320, 3), np.uint8)
+    result = localizer.localize(black, camera_model(CAMERA))
+    assert not result.success and "features" in result.reason
+    # the north road, looking away from anything the gallery saw
+    x, y = small_town.route.waypoints_xy[-1]
+    frame = _render(sim, (float(x), float(y), float(small_town.route.yaw_rad[-1])))
+    result = localizer.localize(frame.image, camera_model(CAMERA))
+    if result.success:  # a wrong answer must at least not be near a gallery place by accident
+        assert _errors(result.world_from_cam, frame.world_from_cam)[0] > 0.25
+    else:
+        assert result.reason
+    # the explicit fall-back answers the best retrieved image's pose, and says so
+    fallback = MapLocalizer(sift_map[0], LocalizerConfig(fallback_to_retrieval=True))
+    result = fallback.localize(black, camera_model(CAMERA))
+    assert result.success and result.fallback and result.reason
+
+
+def test_pose_prior_retrieval(sim, stretch, gallery, tmp_path):
+    from vlocbench.loc.mapping import build_map
+    from vlocbench.loc.registry import MethodConf
+
+    out = tmp_path / "prior"
+    build_map(gallery, MethodConf("sift", "nn-ratio", "pose-prior"), out)
+    localizer = MapLocalizer(out)
+    assert localizer.needs_prior
+    frame = _render(sim, query_pose(stretch, 12))
+    with pytest.raises(LocalizationError, match="prior"):
+        localizer.localize(frame.image, camera_model(CAMERA))
+    prior = frame.world_from_cam.copy()
+    prior[:3, 3] += [1.5, -1.0, 0.0]  # a prior a couple of metres off
+    result = localizer.localize(frame.image, camera_model(CAMERA), prior)
+    assert result.success
+    assert _errors(result.world_from_cam, frame.world_from_cam)[0] < 0.25
+
+
+def test_bad_query_images_are_clear_errors(sift_map):
+    localizer = MapLocalizer(sift_map[0])
+    cam = camera_model(CAMERA)
+    with pytest.raises(LocalizationError, match="320x240"):
+        localizer.localize(np.zeros((100, 100, 3), np.uint8), cam)
+    with pytest.raises(LocalizationError, match=r"\(H, W, 3\)"):
+        localizer.localize(np.zeros((240, 320), np.uint8), cam)
+    with pytest.raises(LocalizationError, match="uint8"):
+        localizer.localize(np.zeros((240, 320, 3), np.float32), cam)
+
+
+def test_corrupt_map_files_are_clear_errors(sift_map, tmp_path):
+    import shutil
+
+    broken = tmp_path / "broken"
+    shutil.copytree(sift_map[0], broken)
+    (broken / "map.json").write_text("{not json")
+    with pytest.raises(LocalizationError, match="corrupt"):
+        MapLocalizer(broken)
+    shutil.copy(sift_map[0] / "map.json", broken / "map.json")
+    (broken / "features.h5").write_bytes(b"garbage")
+    with pytest.raises(LocalizationError, match="corrupt"):
+        MapLocalizer(broken)
+    with pytest.raises(LocalizationError, match="not a map"):
+        MapLocalizer(tmp_path / "nowhere")
+    info = json.loads((sift_map[0] / "map.json").read_text())
+    assert info["method"] == {"features": "sift", "matcher": "nn-ratio", "retrieval": "vlad"}

@@ -1,0 +1,62 @@
+import json
+
+import numpy as np
+import pytest
+
+from tests.loc.plugins import CountingSift
+from vlocbench.errors import ConfigError, LocalizationError, UnknownNameError
+from vlocbench.loc.gallery import Gallery
+from vlocbench.loc.mapping import build_map, sampson_px
+from vlocbench.loc.registry import MethodConf, build_features, method_conf
+
+
+def test_plugin_by_dotted_path_and_cache_reuse(gallery, tmp_path):
+    conf = MethodConf("tests.loc.plugins:CountingSift", "nn-ratio", "pose-prior")
+    CountingSift.calls = 0
+    first = build_map(gallery, conf, tmp_path / "m")
+    assert CountingSift.calls == len(gallery)
+    again = build_map(gallery, conf, tmp_path / "m")
+    assert CountingSift.calls == len(gallery)  # features came from the cache
+    assert again.points == first.points
+    build_map(gallery, conf, tmp_path / "m", overwrite=True)
+    assert CountingSift.calls == 2 * len(gallery)
+
+
+def test_unknown_and_broken_methods():
+    with pytest.raises(
+        UnknownNameError, match="aliked-lightglue, disk-lightglue, orb-teblid, sift, sift-vlad"
+    ):
+        method_conf("superpoint")
+    with pytest.raises(UnknownNameError, match="dotted path"):
+        build_features("surf")
+    with pytest.raises(ConfigError, match="cannot load"):
+        build_features("tests.loc.plugins:Missing")
+    with pytest.raises(ConfigError, match="does not implement FeatureExtractor"):
+        build_features("tests.loc.plugins:NotAnExtractor")
+
+
+def test_gallery_format_and_bad_galleries(gallery, tmp_path):
+    data = json.loads((gallery.root / "gallery.json").read_text())
+    assert set(data) == {"version", "cameras", "images"}
+    first = data["images"][0]
+    assert np.asarray(first["world_from_cam"]).shape == (4, 4)
+    assert gallery.load_image(first["name"]).shape == (240, 320, 3)
+    (tmp_path / "gallery.json").write_text(json.dumps({"cameras": {}, "images": []}))
+    with pytest.raises(LocalizationError, match="no images"):
+        Gallery.load(tmp_path)
+    (tmp_path / "gallery.json").write_text("[")
+    with pytest.raises(LocalizationError, match="corrupt"):
+        Gallery.load(tmp_path)
+    with pytest.raises(LocalizationError, match="not a gallery"):
+        Gallery.load(tmp_path / "none")
+
+
+def test_sampson_distance_of_exact_and_shifted_points():
+    K = np.array([[100.0, 0, 50], [0, 100, 50], [0, 0, 1]])
+    F = np.linalg.inv(K).T @ np.array([[0, 0, 0], [0, 0, -1], [0, 1, 0]]) @ np.linalg.inv(K)
+    # pure sideways translation along x: epipolar lines are horizontal
+    xa = np.array([[10.0, 20.0], [60.0, 70.0]])
+    assert sampson_px(F, xa, xa + np.array([5.0, 0.0])) == pytest.approx([0, 0], abs=1e-9)
+    assert sampson_px(F, xa, xa + np.array([0.0, 3.0])) == pytest.approx(
+        [3 / np.sqrt(2)] * 2, rel=1e-6
+    )
