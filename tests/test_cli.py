@@ -30,7 +30,7 @@ def test_drive_prints_failure_rates(capsys, tmp_path):
 
 def test_drive_rejects_unknown_localizers_and_bad_configs(capsys, tmp_path):
     assert main(["drive", "town10", "--localizer", "gps"]) == 2
-    assert "unknown localizer 'gps'; valid: odometry, oracle" in capsys.readouterr().err
+    assert "unknown localizer 'gps'; valid: odometry, oracle, visual" in capsys.readouterr().err
     config = tmp_path / "episode.yaml"
     config.write_text("latency: {mode: sometimes}\n")
     assert main(["drive", "town10", "--config", str(config)]) == 2
@@ -55,6 +55,24 @@ def test_gallery_build_map_and_localize(tmp_path, capsys):
     assert main(["localize", str(image), "--map", str(maps)]) == 0
     out = capsys.readouterr().out
     assert "world_from_cam" in out and "inliers" in out
+    assert (
+        main(
+            [
+                "drive",
+                str(spec),
+                "--localizer",
+                "visual",
+                "--map",
+                str(maps),
+                "--mode",
+                "ground_truth",
+            ]
+        )
+        == 0
+    )
+    assert "seed 0: 0 failures" in capsys.readouterr().out
+    assert main(["drive", str(spec), "--localizer", "visual"]) == 2
+    assert "needs --map" in capsys.readouterr().err
     assert main(["build-map", str(gallery), "--method", "surf"]) == 2
     assert "unknown method 'surf'" in capsys.readouterr().err
     assert main(["localize", str(image), "--map", str(tmp_path / "none")]) == 2

@@ -84,6 +84,28 @@ def _tour(args: argparse.Namespace) -> int:
     return 0
 
 
+def _visual_localizer(map_dir: Path | None) -> object:
+    """The map's localizer on a camera like the one that took its gallery (right-facing mount)."""
+    import json
+
+    import numpy as np
+
+    from vlocbench.bench.visual import VisualLocalizer
+    from vlocbench.loc.gallery import Gallery
+    from vlocbench.sim import Camera, Extrinsics, Intrinsics
+
+    if map_dir is None:
+        raise VlocbenchError("--localizer visual needs --map MAP_DIR (see `vlocbench build-map`)")
+    info = map_dir / "map.json"
+    if not info.is_file():
+        raise VlocbenchError(f"--map: {map_dir} is not a map (no map.json)")
+    gallery = Gallery.load(json.loads(info.read_text())["gallery"])
+    model = next(iter(gallery.cameras.values()))
+    fov = float(np.degrees(2 * np.arctan(model.width / 2 / model.K[0, 0])))
+    camera = Camera("gallery", Intrinsics(model.width, model.height, fov), Extrinsics())
+    return VisualLocalizer(map_dir, (camera,))
+
+
 def _drive(args: argparse.Namespace) -> int:
     import dataclasses
 
@@ -104,6 +126,7 @@ def _drive(args: argparse.Namespace) -> int:
     localizers = {
         "odometry": lambda: None,
         "oracle": lambda: OracleLocalizer(OracleConfig(args.oracle_sigma, args.oracle_yaw_deg)),
+        "visual": lambda: _visual_localizer(args.map),
     }
     if args.localizer not in localizers:
         raise UnknownNameError("localizer", args.localizer, localizers)
@@ -262,7 +285,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("drive", help="drive a town's route in closed loop and print failure rates")
     p.add_argument("town", help="built-in town name or a town spec YAML")
-    p.add_argument("--localizer", default="odometry", help="odometry (no localization) or oracle")
+    p.add_argument(
+        "--localizer", default="odometry", help="odometry (none), oracle, or visual (with --map)"
+    )
+    p.add_argument("--map", type=Path, help="map folder for --localizer visual")
     p.add_argument("--mode", choices=("navigate", "ground_truth"), help="override the config's")
     p.add_argument("--config", type=Path, help="episode config YAML (EpisodeConfig fields)")
     p.add_argument("--seed", type=int, default=0, help="first seed")

@@ -114,6 +114,11 @@ def test_corrupt_map_files_are_clear_errors(sift_map, tmp_path):
     (broken / "features.h5").write_bytes(b"garbage")
     with pytest.raises(LocalizationError, match="corrupt"):
         MapLocalizer(broken)
+    shutil.copy(sift_map[0] / "features.h5", broken / "features.h5")
+    for model_file in (broken / "sfm").iterdir():
+        model_file.write_bytes(b"\x00" * 7)
+    with pytest.raises(LocalizationError, match=r"unreadable|no 3D points"):
+        MapLocalizer(broken)
     with pytest.raises(LocalizationError, match="not a map"):
         MapLocalizer(tmp_path / "nowhere")
     info = json.loads((sift_map[0] / "map.json").read_text())
