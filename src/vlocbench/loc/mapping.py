@@ -155,7 +155,8 @@ def cam_from_world_rigid(world_from_cam: np.ndarray) -> pycolmap.Rigid3d:
 # -- the pipeline --------------------------------------------------------------------------------
 def _extract(gallery: Gallery, conf: MethodConf, store: FeatureStore, overwrite: bool,
              progress: Progress | None) -> None:  # fmt: skip
-    todo = gallery.names if overwrite else [n for n in gallery.names if n not in store.names()]
+    done = set() if overwrite else store.names()
+    todo = [n for n in gallery.names if n not in done]
     if not todo:
         return
     extractor = build_features(conf.features)
