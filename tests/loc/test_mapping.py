@@ -60,3 +60,14 @@ def test_sampson_distance_of_exact_and_shifted_points():
     assert sampson_px(F, xa, xa + np.array([0.0, 3.0])) == pytest.approx(
         [3 / np.sqrt(2)] * 2, rel=1e-6
     )
+
+
+def test_maps_are_keyed_by_gallery_method_and_configuration(gallery, tmp_path):
+    from vlocbench.loc.mapping import MappingConfig, default_map_dir
+
+    sift, orb = method_conf("sift"), method_conf("orb-teblid")
+    a = default_map_dir(tmp_path, gallery, "sift", sift, MappingConfig())
+    assert a == default_map_dir(tmp_path, gallery, "sift", sift, MappingConfig())
+    assert a.parent.name == gallery.identity
+    assert a != default_map_dir(tmp_path, gallery, "orb-teblid", orb, MappingConfig())
+    assert a != default_map_dir(tmp_path, gallery, "sift", sift, MappingConfig(num_pairs=10))
