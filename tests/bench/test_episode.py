@@ -156,6 +156,8 @@ def test_episodes_are_deterministic(sim, path):
 def test_bad_episode_config():
     with pytest.raises(ConfigError, match="localization_rate_hz"):
         EpisodeConfig(localization_rate_hz=0)
+    with pytest.raises(ConfigError, match=r"oracle\.failure_probability"):
+        OracleConfig(failure_probability=1.5)
     with pytest.raises(UnknownNameError, match="valid: ground_truth, navigate"):
         from_dict(EpisodeConfig, {"mode": "fly"})
     with pytest.raises(UnknownNameError, match="seed"):

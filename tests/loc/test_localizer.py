@@ -123,3 +123,15 @@ def test_corrupt_map_files_are_clear_errors(sift_map, tmp_path):
         MapLocalizer(tmp_path / "nowhere")
     info = json.loads((sift_map[0] / "map.json").read_text())
     assert info["method"] == {"features": "sift", "matcher": "nn-ratio", "retrieval": "vlad"}
+
+
+def test_bad_localizer_and_mapping_configs():
+    from vlocbench.errors import ConfigError
+    from vlocbench.loc.mapping import MappingConfig
+
+    with pytest.raises(ConfigError, match=r"localizer\.top_k"):
+        LocalizerConfig(top_k=0)
+    with pytest.raises(ConfigError, match=r"localizer\.min_inliers"):
+        LocalizerConfig(min_inliers=3)
+    with pytest.raises(ConfigError, match=r"mapping\.pairs"):
+        MappingConfig(pairs="random")

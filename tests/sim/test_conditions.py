@@ -2,7 +2,7 @@ import pytest
 
 from vlocbench.config import config_hash, from_dict
 from vlocbench.errors import ConfigError, UnknownNameError
-from vlocbench.sim import Conditions, Illumination, Intrinsics, Weather
+from vlocbench.sim import Conditions, Exposure, Illumination, Intrinsics, Weather
 
 
 def test_illumination_halves_intensity_and_elevation():
@@ -22,6 +22,10 @@ def test_bad_values_name_their_field():
         Intrinsics(fov_deg=0)
     with pytest.raises(UnknownNameError, match="autumn, summer, winter"):
         Conditions(season="spring")  # type: ignore[arg-type]
+    with pytest.raises(ConfigError, match=r"exposure\.max_gain"):
+        Exposure(max_gain=0.5)
+    with pytest.raises(UnknownNameError, match="valid: auto, fixed"):
+        from_dict(Conditions, {"exposure": {"mode": "manual"}})
 
 
 def test_from_dict_builds_nested_conditions_and_hashes_stably():

@@ -167,7 +167,6 @@ class Episode:
         self.segments: list[Segment] = []
         self.columns = _Columns()
         self.segment_start_s = 0.0
-        self.busy_until_s = 0.0
         self.next_query_s = 1.0 / config.localization_rate_hz
         self.distance_m = 0.0
         self.offsets_m: list[float] = []
@@ -202,9 +201,9 @@ class Episode:
         frames = tuple(self.sim.render(self.localizer.cameras)) if self.localizer.cameras else ()
         truth = state.world_from_vehicle()
         gt = truth if getattr(self.localizer, "uses_ground_truth", False) else None
-        prior = planar_pose(*self._ekf_pose())
+        ekf_pose = self._ekf_pose()
         start = time.perf_counter()
-        estimate = self.localizer.localize(LocalizationQuery(t, frames, prior, gt))
+        estimate = self.localizer.localize(LocalizationQuery(t, frames, planar_pose(*ekf_pose), gt))
         if estimate.compute_time_s == 0.0:
             estimate = PoseEstimate(
                 estimate.success, estimate.world_from_vehicle, estimate.covariance,
@@ -212,13 +211,11 @@ class Episode:
             )  # fmt: skip
         lat = self.config.latency
         latency = {"none": 0.0, "fixed": lat.fixed_s, "measured": estimate.compute_time_s}[lat.mode]
-        self.in_flight.append(
-            _InFlight(t + latency, t, estimate, planar_of(truth), self._ekf_pose(), latency)
-        )
-        self.busy_until_s = t + latency
+        due_s = t + latency
+        self.in_flight.append(_InFlight(due_s, t, estimate, planar_of(truth), ekf_pose, latency))
         period = 1.0 / self.config.localization_rate_hz
-        # the next tick after this one at which the localizer is free again
-        while self.next_query_s <= t + 1e-9 or self.next_query_s < self.busy_until_s - 1e-9:
+        # the next tick after this one at which the localizer is free again (its answer is out)
+        while self.next_query_s <= t + 1e-9 or self.next_query_s < due_s - 1e-9:
             self.next_query_s += period
 
     def _deliver(self, t: float) -> None:
@@ -262,16 +259,13 @@ class Episode:
         step, t = 0, 0.0
         while not self.progress.finished and t < limit_s:
             state = self.sim.state
-            if (
-                self.localizer is not None
-                and t >= self.next_query_s - 1e-9
-                and t >= self.busy_until_s - 1e-9
-            ):
+            if self.localizer is not None and t >= self.next_query_s - 1e-9:
                 self._query(t, state)
             self._deliver(t)
+            ekf_pose = self._ekf_pose()
             if c.record_trajectory:
-                self.columns.add(t, state, self._ekf_pose())
-            x, y, yaw = self._ekf_pose() if navigate else (state.x_m, state.y_m, state.yaw_rad)
+                self.columns.add(t, state, ekf_pose)
+            x, y, yaw = ekf_pose if navigate else (state.x_m, state.y_m, state.yaw_rad)
             speed = float(self.ekf.x[3]) if c.speed_source == "ekf" else state.speed_mps
             target = self.planner.step(np.array([x, y]), speed)
             cmd = self.controller.step(x, y, yaw, speed, target.xy, target.remaining_m)

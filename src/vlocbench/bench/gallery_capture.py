@@ -7,7 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
-from vlocbench.loc.gallery import CameraModel, Gallery, GalleryWriter
+from vlocbench.bench.visual import camera_model
+from vlocbench.loc.gallery import Gallery, GalleryWriter
 from vlocbench.nav import (
     ControllerConfig,
     LocalPlanner,
@@ -40,10 +41,9 @@ def capture_gallery(
         s = sim.state
         if travelled_m >= next_m - 1e-9:
             for frame in sim.render(cameras):
-                i = frame.camera.intrinsics
                 writer.add(
                     f"{shots:05d}_{frame.camera.name}.png", frame.image, frame.camera.name,
-                    CameraModel(i.width, i.height, i.K), frame.world_from_cam,
+                    camera_model(frame.camera), frame.world_from_cam,
                 )  # fmt: skip
             shots += 1
             next_m += spacing_m

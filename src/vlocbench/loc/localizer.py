@@ -100,15 +100,20 @@ class MapLocalizer:
         store = FeatureStore(self.map_dir / "features.h5")
         ids = sorted(rec.images)
         self.images: list[_MapImage] = []
-        for image_id in ids:
-            im = rec.images[image_id]
-            feats = store.read(im.name)
-            p3d = np.array([p.point3D_id if p.has_point3D() else -1 for p in im.points2D], np.int64)
-            if len(p3d) != len(feats):
-                raise LocalizationError(f"{store.path} does not match the model for {im.name!r}")
-            keep = np.flatnonzero(p3d >= 0)
-            pose = np.linalg.inv(np.vstack([im.cam_from_world().matrix(), [0, 0, 0, 1]]))
-            self.images.append(_MapImage(im.name, pose, feats.subset(keep), p3d[keep]))
+        with store.reading() as read:
+            for image_id in ids:
+                im = rec.images[image_id]
+                feats = read(im.name)
+                p3d = np.array(
+                    [p.point3D_id if p.has_point3D() else -1 for p in im.points2D], np.int64
+                )
+                if len(p3d) != len(feats):
+                    raise LocalizationError(
+                        f"{store.path} does not match the model for {im.name!r}"
+                    )
+                keep = np.flatnonzero(p3d >= 0)
+                pose = np.linalg.inv(np.vstack([im.cam_from_world().matrix(), [0, 0, 0, 1]]))
+                self.images.append(_MapImage(im.name, pose, feats.subset(keep), p3d[keep]))
         self.points3D = {pid: p.xyz for pid, p in rec.points3D.items()}
         self.poses = np.stack([m.world_from_cam for m in self.images])
         self.global_descriptors: NDArray[np.float32] | None = None

@@ -19,6 +19,7 @@ import json
 import shutil
 import time
 from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -98,13 +99,11 @@ class FeatureStore:
                 )  # fmt: skip
                 f.flush()
 
-    def read(self, name: str) -> Features:
+    @contextmanager
+    def reading(self) -> Iterator[Callable[[str], Features]]:
+        """Open the file once for many reads: ``with store.reading() as read: read(name)``."""
         with self._open("r") as f:
-            return self._get(f, name)
-
-    def read_all(self, names: list[str]) -> list[Features]:
-        with self._open("r") as f:
-            return [self._get(f, n) for n in names]
+            yield lambda name: self._get(f, name)
 
     def _get(self, f: h5py.File, name: str) -> Features:
         try:
@@ -178,16 +177,17 @@ def _global(gallery: Gallery, conf: MethodConf, out: Path, features: FeatureStor
         return None
     state_path, store_path = out / "retrieval.npz", out / "global.h5"
     if overwrite or not state_path.exists():
-        descriptor.fit(features.read_all(gallery.names))
+        with features.reading() as read:
+            descriptor.fit([read(n) for n in gallery.names])
         np.savez(state_path, **descriptor.state())
         store_path.unlink(missing_ok=True)
     else:
         with np.load(state_path) as state:
             descriptor.load_state(dict(state))
-    with h5py.File(store_path, "a") as f:
+    with h5py.File(store_path, "a") as f, features.reading() as read:
         for name in gallery.names:
             if name not in f:
-                f[name] = descriptor.describe(gallery.load_image(name), features.read(name))
+                f[name] = descriptor.describe(gallery.load_image(name), read(name))
         return np.stack([f[n][()] for n in gallery.names])
 
 
@@ -210,12 +210,12 @@ def _match(gallery: Gallery, conf: MethodConf, mapping: MappingConfig, features:
            pairs: list[tuple[str, str]], path: Path, progress: Progress | None) -> dict[tuple[str, str], np.ndarray]:  # fmt: skip
     matcher = None
     out: dict[tuple[str, str], np.ndarray] = {}
-    with h5py.File(path, "a") as f:
+    with h5py.File(path, "a") as f, features.reading() as read:
         for k, (a, b) in enumerate(pairs):
             key = _pair_key(a, b)
             if key not in f:
                 matcher = matcher or build_matcher(conf.matcher)
-                fa, fb = features.read(a), features.read(b)
+                fa, fb = read(a), read(b)
                 m = matcher.match(fa, fb)
                 if len(m):
                     ia, ib = (
@@ -255,9 +255,10 @@ def _triangulate(gallery: Gallery, mapping: MappingConfig, features: FeatureStor
         db.write_rig(rig, use_rig_id=True)
     for frame in rec.frames.values():
         db.write_frame(frame, use_frame_id=True)
-    for name, image_id in ids.items():
-        db.write_image(rec.images[image_id], use_image_id=True)
-        db.write_keypoints(image_id, features.read(name).keypoints.astype(np.float32) + 0.5)
+    with features.reading() as read:
+        for name, image_id in ids.items():
+            db.write_image(rec.images[image_id], use_image_id=True)
+            db.write_keypoints(image_id, read(name).keypoints.astype(np.float32) + 0.5)
     for (a, b), m in matches.items():
         if len(m):
             db.write_matches(ids[a], ids[b], m)

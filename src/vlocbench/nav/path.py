@@ -8,6 +8,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vlocbench.errors import ConfigError
+from vlocbench.geometry import headings_of
 
 Array = NDArray[np.float64]
 
@@ -43,8 +44,7 @@ class WaypointPath:
             raise ConfigError("path", "consecutive waypoints must differ")
         self.xy = xy
         self.s_m = np.concatenate([[0.0], np.cumsum(seg_len)])
-        yaw = np.arctan2(seg[:, 1], seg[:, 0])
-        self.yaw_rad = np.append(yaw, yaw[-1])
+        self.yaw_rad = headings_of(xy)
         self._seg_dir = seg / seg_len[:, None]
         self._seg_len = seg_len
 

@@ -66,8 +66,8 @@ class Simulator:
         self.state = VehicleState(x0, y0, float(route.yaw_rad[0]))
         self.traffic = TrafficModel(town, traffic, avoid_xy=route.waypoints_xy[0])
         self._renderer: Renderer | None = None
-        self._sync()
-        self._touching: set[str] = set(touching(self.scene))
+        self._touching: set[str] = set()
+        self._placed()
 
     @property
     def renderer(self) -> Renderer:
@@ -124,13 +124,15 @@ class Simulator:
         """
         self.state = VehicleState(x_m, y_m, yaw_rad)
         self.traffic = TrafficModel(self.town, self.conditions.traffic, avoid_xy=self.position_xy)
-        self._sync()
-        self._touching = set(touching(self.scene))
-        return self.state
+        return self._placed()
 
     def teleport(self, x_m: float, y_m: float, yaw_rad: float) -> VehicleState:
         """Place the car at rest at a new pose (re-initialization); contacts there are not events."""
         self.state = at_rest(self.state, x_m, y_m, yaw_rad)
+        return self._placed()
+
+    def _placed(self) -> VehicleState:
+        """Sync the scene to a car put down by hand: what it touches there is not an event."""
         self._sync()
         self._touching = set(touching(self.scene))
         return self.state
