@@ -2,6 +2,7 @@
 
     python benchmarks/bench_loc.py [--town town01] [--methods sift,orb-teblid,aliked-lightglue]
                                    [--k 0,6] [--every 1] [--speed-k 5] [--out out/bench_loc]
+                                   [--confident-inliers 0]
 
 Galleries and maps are built once under --out and reused. Recall: the town's route driven on ground
 truth with queries at 2 Hz (every --every-th query kept), at each illumination level k; a failed
@@ -24,7 +25,7 @@ from vlocbench.bench import EpisodeConfig, plan_town_route, run_episode
 from vlocbench.bench.gallery_capture import capture_gallery
 from vlocbench.bench.visual import VisualLocalizer, camera_model
 from vlocbench.loc.gallery import GALLERY_FILE, Gallery
-from vlocbench.loc.localizer import MapLocalizer
+from vlocbench.loc.localizer import LocalizerConfig, MapLocalizer
 from vlocbench.loc.mapping import MAP_FILE, MappingConfig, build_map
 from vlocbench.loc.registry import method_conf
 from vlocbench.sim import Conditions, Illumination, Simulator, gallery_camera
@@ -59,6 +60,9 @@ def main() -> None:
     ap.add_argument("--speed-queries", type=int, default=20)
     ap.add_argument("--num-pairs", type=int, default=25)
     ap.add_argument("--out", type=Path, default=Path("out/bench_loc"))
+    ap.add_argument(
+        "--confident-inliers", type=int, default=0, help="LocalizerConfig.confident_inliers"
+    )
     args = ap.parse_args()
     town = generate_town(load_town_spec(args.town))
     path = plan_town_route(town)
@@ -86,7 +90,8 @@ def main() -> None:
         )  # fmt: skip
         # speed: queries along the route at k = speed_k
         sim = Simulator(town, Conditions(illumination=Illumination(k=args.speed_k)))
-        localizer = MapLocalizer(map_dir)
+        loc_config = LocalizerConfig(confident_inliers=args.confident_inliers)
+        localizer = MapLocalizer(map_dir, loc_config)
         model = camera_model(cam)
         idx = np.linspace(5, len(path) - 5, args.speed_queries + 1).astype(int)
         totals, stages = [], {}
@@ -108,7 +113,7 @@ def main() -> None:
         # recall along the ground-truth drive
         for k in (float(v) for v in args.k.split(",")):
             sim = Simulator(town, Conditions(illumination=Illumination(k=k)))
-            loc = EveryNth(map_dir, (cam,), every=args.every, name=method)
+            loc = EveryNth(map_dir, (cam,), loc_config, every=args.every, name=method)
             r = run_episode(sim, path, loc, EpisodeConfig(mode="ground_truth"))
             sim.close()
             recs = [x for x in r.localizations if x.reason != "skipped"]

@@ -54,6 +54,20 @@ def test_query_between_gallery_images_is_localized(sim, stretch, sift_map):
         assert min(near) < 3.0 and sum(d < 6.0 for d in near) >= 3
 
 
+def test_confident_pose_stops_matching_early(sim, stretch, sift_map):
+    frame = _render(sim, query_pose(stretch, 8))
+    every = MapLocalizer(sift_map[0]).localize(frame.image, camera_model(CAMERA))
+    early = MapLocalizer(sift_map[0], LocalizerConfig(confident_inliers=20)).localize(
+        frame.image, camera_model(CAMERA)
+    )
+    assert every.success and early.success, (every.reason, early.reason)
+    # the best-ranked image alone gives a confident pose: the other four are never matched
+    assert early.cluster == every.retrieved[:1] and len(every.cluster) > 1
+    assert 20 <= early.num_inliers < every.num_inliers
+    dt, dr = _errors(early.world_from_cam, frame.world_from_cam)
+    assert dt < 0.25 and dr < 2.0
+
+
 def test_unmapped_place_and_featureless_image_fail_cleanly(sim, small_town, sift_map):
     localizer = MapLocalizer(sift_map[0])
     black = np.zeros((240, 320, 3), np.uint8)
@@ -133,5 +147,7 @@ def test_bad_localizer_and_mapping_configs():
         LocalizerConfig(top_k=0)
     with pytest.raises(ConfigError, match=r"localizer\.min_inliers"):
         LocalizerConfig(min_inliers=3)
+    with pytest.raises(ConfigError, match="confident_inliers"):
+        LocalizerConfig(confident_inliers=-1)
     with pytest.raises(ConfigError, match=r"mapping\.pairs"):
         MappingConfig(pairs="random")

@@ -40,11 +40,16 @@ class LocalizerConfig:
     ransac_seed: int = 0  # RANSAC is seeded: the same query gives the same pose
     prior_max_angle_deg: float = 60.0  # pose-prior retrieval: gallery views within this angle
     fallback_to_retrieval: bool = False  # on failure, answer the best retrieved image's pose
+    # > 0: match retrieved images one at a time (best first), re-running PnP as correspondences
+    # accumulate, and stop once a pose has this many inliers; saves most of the matching time of
+    # slow matchers (LightGlue). 0: match every retrieved image, one PnP per cluster.
+    confident_inliers: int = 0
 
     def __post_init__(self) -> None:
         require(self.top_k >= 1, "localizer.top_k", "must be >= 1")
         require(self.ransac_max_error_px > 0, "localizer.ransac_max_error_px", "must be > 0")
         require(self.min_inliers >= 4, "localizer.min_inliers", "must be >= 4")
+        require(self.confident_inliers >= 0, "localizer.confident_inliers", "must be >= 0")
 
 
 @dataclass(frozen=True)
@@ -172,34 +177,39 @@ class MapLocalizer:
         names = tuple(self.images[i].name for i in retrieved)
         if len(feats) < c.min_inliers:
             return self._failed(retrieved, seconds, f"only {len(feats)} features in the image")
-        t = time.perf_counter()
-        per_image = {}
-        for i in retrieved:
-            m = self.matcher.match(feats, self.images[i].features)
-            per_image[int(i)] = m
-        seconds["matching"] = time.perf_counter() - t
-        t = time.perf_counter()
         best: tuple[int, dict | None, list[int], int] = (0, None, [], 0)
         cam = colmap_camera(camera, 1)
         options = pycolmap.AbsolutePoseEstimationOptions()
         options.ransac.max_error = c.ransac_max_error_px
         options.ransac.random_seed = c.ransac_seed
+        seconds["matching"] = seconds["pnp"] = 0.0
+        progressive = c.confident_inliers > 0
         for cluster in self._clusters(retrieved):
-            q_idx, xyz = [], []
-            for i in cluster:
-                m = per_image[i]
+            q_idx: list[NDArray[np.int64]] = []
+            xyz: list[NDArray[np.float64]] = []
+            for n, i in enumerate(cluster):
+                t = time.perf_counter()
+                m = self.matcher.match(feats, self.images[i].features)
+                seconds["matching"] += time.perf_counter() - t
                 q_idx.append(m[:, 0])
                 xyz.extend(self.points3D[p] for p in self.images[i].point_ids[m[:, 1]])
-            q = np.concatenate(q_idx) if q_idx else np.zeros(0, np.int64)
-            if len(q) < c.min_inliers:
-                continue
-            points2D = feats.keypoints[q].astype(np.float64) + 0.5
-            answer = pycolmap.estimate_and_refine_absolute_pose(
-                points2D, np.asarray(xyz, np.float64), cam, options, return_covariance=True
-            )
-            if answer is not None and answer["num_inliers"] > best[0]:
-                best = (int(answer["num_inliers"]), answer, cluster, len(q))
-        seconds["pnp"] = time.perf_counter() - t
+                if not progressive and n < len(cluster) - 1:
+                    continue
+                q = np.concatenate(q_idx)
+                if len(q) < c.min_inliers:
+                    continue
+                t = time.perf_counter()
+                answer = pycolmap.estimate_and_refine_absolute_pose(
+                    feats.keypoints[q].astype(np.float64) + 0.5,
+                    np.asarray(xyz, np.float64), cam, options, return_covariance=True,
+                )  # fmt: skip
+                seconds["pnp"] += time.perf_counter() - t
+                if answer is not None and answer["num_inliers"] > best[0]:
+                    best = (int(answer["num_inliers"]), answer, cluster[: n + 1], len(q))
+                if progressive and best[0] >= c.confident_inliers:
+                    break
+            if progressive and best[0] >= c.confident_inliers:
+                break
         inliers, answer, cluster, n_corr = best
         if answer is None or inliers < c.min_inliers:
             return self._failed(retrieved, seconds, f"PnP found {inliers} inliers (< {c.min_inliers})",

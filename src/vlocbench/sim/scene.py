@@ -329,9 +329,36 @@ class _SceneBuilder:
                 self.options.cell_m,
             )  # fmt: skip
 
-    def buildings(self) -> None:
-        cell = self.options.cell_m
+    def facade_wall(
+        self,
+        material: str,
+        tile: tex.FacadeTile,
+        origin: Array,
+        u: Array,
+        length_m: float,
+        z_range_m: tuple[float, float],
+        rng: np.random.Generator,
+    ) -> None:
+        """A wall of one-bay x one-floor cells, each a random variant of the style's atlas."""
         up = np.array([0.0, 0, 1])
+        n = max(1, round(length_m / tile.width_m))
+        bay_m = length_m / n  # whole bays: windows never cut at a corner
+        uv_per_m = (1 / (tile.variants * bay_m), -1 / tile.height_m)
+        z, top = z_range_m
+        while z < top - 1e-6:
+            height = min(tile.height_m, top - z)
+            cell = (
+                self.options.cell_m if z < 12.0 else 0.0
+            )  # lower walls: fine cells for headlights
+            for j in range(n):
+                variant = int(rng.integers(0, tile.variants))
+                self.meshes[material].quad(
+                    origin + u * (j * bay_m) + up * z, u, up, bay_m, height,
+                    (variant / tile.variants, 1.0), uv_per_m, cell,
+                )  # fmt: skip
+            z += tile.height_m
+
+    def buildings(self) -> None:
         for k, b in enumerate(self.town.buildings):
             x0, y0, x1, y1 = b.rect
             corners = [
@@ -342,6 +369,7 @@ class _SceneBuilder:
             facade = f"tower{b.facade % 3}" if b.tower else f"facade{b.facade}"
             mat = facade if b.tower else f"{facade}_{b.tint}"
             tile = self.tiles[facade]
+            cells = np.random.default_rng((self.town.spec.seed, k))  # this building's own cells
             for s in range(4):
                 a, c = corners[s], corners[(s + 1) % 4]
                 length = float(np.linalg.norm(c - a))
@@ -350,22 +378,7 @@ class _SceneBuilder:
                 if b.shop >= 0 and sides[s] == b.front:
                     self.shopfronts(a, u, length, b.shop)
                     z0 = GROUND_FLOOR_M
-                low = min(b.height_m, 12.0) - z0  # lower walls: fine cells for headlights
-                kv = -1 / tile.height_m
-                self.meshes[mat].quad(
-                    a + up * z0, u, up, length, low, (0.0, 0.0), (1 / tile.width_m, kv), cell
-                )
-                if b.height_m > 12.0:
-                    self.meshes[mat].quad(
-                        a + up * 12.0,
-                        u,
-                        up,
-                        length,
-                        b.height_m - 12.0,
-                        (0.0, (12.0 - z0) * kv),
-                        (1 / tile.width_m, kv),
-                        12.0,
-                    )
+                self.facade_wall(mat, tile, a, u, length, (z0, b.height_m), cells)
             self.meshes["roof"].quad(
                 np.array([x0, y0, b.height_m]),
                 np.array([1.0, 0, 0]),

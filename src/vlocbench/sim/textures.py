@@ -1,7 +1,7 @@
 """Procedural textures (uint8 RGB arrays, (H, W, 3), row 0 at the top) drawn with OpenCV.
 
-Facades are tiles of ``bays x floors`` windows; ground floors carry shop windows, doors and signs
-with text. Everything is a pure function of its arguments and an explicit ``numpy`` Generator, so a
+Facades are atlases of one-bay x one-floor window cells; ground floors carry shop windows, doors
+and signs with text. Everything is a pure function of its arguments and an explicit ``numpy`` Generator, so a
 town's textures are as deterministic as its layout.
 """
 
@@ -46,18 +46,29 @@ def _rgb(color: tuple[float, float, float] | NDArray) -> tuple[int, int, int]:
 
 @dataclass(frozen=True)
 class FacadeTile:
-    """A repeating facade texture covering ``width_m`` x ``height_m`` of wall."""
+    """A facade texture: ``variants`` cells side by side, each covering ``width_m`` x ``height_m``."""
 
     image: Image
     width_m: float
     height_m: float
+    variants: int = 1
 
 
-def facade(style: int, floor_height_m: float, rng: np.random.Generator) -> FacadeTile:
-    """Upper-floor facade tile: 2 floors x 2 bays of windows on brick, plaster, stone or glass."""
+FACADE_VARIANTS = 12  # window cells per facade style; every wall draws its own sequence of them
+
+
+def facade(
+    style: int, floor_height_m: float, rng: np.random.Generator, variants: int = FACADE_VARIANTS
+) -> FacadeTile:
+    """One facade style as ``variants`` one-bay x one-floor cells of brick, plaster, stone or glass.
+
+    The style (material, colours, bay width, window shape) is shared by its cells; curtains, panes,
+    blinds, plants, stains and pipes differ from cell to cell, so that a wall laid out from random
+    cells repeats neither along itself nor across the buildings of the same style.
+    """
     family = style % 5
     bay_m = float(rng.uniform(3.0, 4.2))
-    w, h = round(2 * bay_m * PX_PER_M), round(2 * floor_height_m * PX_PER_M)
+    w, h = round(bay_m * PX_PER_M), round(floor_height_m * PX_PER_M)
     base = np.array(
         [
             rng.uniform([150, 70, 50], [190, 100, 75]),  # brick
@@ -67,9 +78,58 @@ def facade(style: int, floor_height_m: float, rng: np.random.Generator) -> Facad
             rng.uniform([60, 80, 100], [90, 115, 140]),  # glass curtain wall
         ][family]
     )
-    img = np.ones((h, w, 3), np.float32) * base
-    img += noise((h, w), rng, 24, 14)[..., None]
-    if family == 0:  # brick courses
+    win_w = float(rng.uniform(0.35, 0.6)) * bay_m
+    win_h = float(rng.uniform(0.45, 0.62)) * floor_height_m
+    frame = rng.uniform(20, 240, 3)
+    glass = rng.uniform([40, 55, 70], [90, 110, 130])
+    balconies = family in (1, 2) and rng.random() < 0.5
+    shutter_color = rng.uniform(40, 200, 3) if family in (0, 1) and rng.random() < 0.4 else None
+    cells = []
+    for _ in range(variants):
+        img = np.ones((h, w, 3), np.float32) * base
+        img += noise((h, w), rng, 24, 14)[..., None]
+        _wall_pattern(img, family, base, rng)
+        if family == 4:  # glass: a full-height panel with mullions
+            x0, x1, y0, y1 = 3, w - 3, 6, h - 10
+        else:
+            x0, x1 = round((w - win_w * PX_PER_M) / 2), round((w + win_w * PX_PER_M) / 2)
+            y0 = round((floor_height_m - win_h) * 0.45 * PX_PER_M)
+            y1 = round(y0 + win_h * PX_PER_M)
+        _window(img, (x0, y0, x1, y1), glass, frame, rng)
+        if family != 4:
+            cv2.rectangle(img, (x0 - 4, y1), (x1 + 4, y1 + 6), _rgb(base * 0.6 + 60), -1)
+            if rng.random() < 0.2:  # flower box on the sill
+                cv2.rectangle(img, (x0, y1 - 10), (x1, y1), _rgb(rng.uniform(60, 160, 3)), -1)
+                for xx in range(x0 + 4, x1 - 4, 9):
+                    leaf = rng.uniform([30, 90, 20], [90, 170, 70])
+                    cv2.circle(img, (xx, y1 - 12), int(rng.integers(3, 7)), _rgb(leaf), -1)
+            if rng.random() < 0.12:  # air conditioner under the window
+                ax = int(rng.integers(x0, max(x0 + 1, x1 - 40)))
+                cv2.rectangle(img, (ax, y1 + 10), (ax + 40, y1 + 34), (205, 205, 200), -1)
+                cv2.circle(img, (ax + 20, y1 + 22), 8, (120, 120, 120), 1)
+        if shutter_color is not None:
+            sw = (x1 - x0) // 3
+            for sx in (x0 - sw - 2, x1 + 2):
+                cv2.rectangle(img, (sx, y0), (sx + sw, y1), _rgb(shutter_color), -1)
+                for yy in range(y0, y1, 6):
+                    cv2.line(img, (sx, yy), (sx + sw, yy), _rgb(shutter_color * 0.7), 1)
+        if balconies and rng.random() < 0.5:
+            railing = _rgb(frame * 0.5)
+            cv2.rectangle(img, (x0 - 12, y1 - 28), (x1 + 12, y1 + 2), railing, 2)
+            for xx in range(x0 - 12, x1 + 12, 8):
+                cv2.line(img, (xx, y1 - 28), (xx, y1 + 2), railing, 1)
+        if family == 4:
+            img = cv2.GaussianBlur(img, (3, 3), 0)
+        else:
+            _weathering(img, rng, base)
+        cells.append(_finish(img, rng))
+    return FacadeTile(atlas(cells, variants), bay_m, floor_height_m, variants)
+
+
+def _wall_pattern(img: NDArray, family: int, base: NDArray, rng: np.random.Generator) -> None:
+    """Brick courses or stone/panel joints over a cell (in place)."""
+    h, w = img.shape[:2]
+    if family == 0:
         course = max(4, PX_PER_M // 13)
         for row, y in enumerate(range(0, h, course)):
             cv2.line(img, (0, y), (w, y), _rgb(base * 0.7), 1)
@@ -81,72 +141,56 @@ def facade(style: int, floor_height_m: float, rng: np.random.Generator) -> Facad
             .repeat(course, 0)
             .repeat(course * 2, 1)[:h, :w, None]
         )
-    elif family in (2, 3):  # stone blocks / concrete panels
-        step_y = h // (2 if family == 3 else 6)
-        step_x = w // (2 if family == 3 else 5)
-        for y in range(0, h, step_y):
+    elif family in (2, 3):  # stone blocks (3 courses a floor) / one concrete panel a cell
+        rows, cols = (3, 2) if family == 2 else (1, 1)
+        for y in range(0, h, h // rows):
             cv2.line(img, (0, y), (w, y), _rgb(base * 0.75), 2)
-        for x in range(0, w, step_x):
+        for x in range(0, w, w // cols):
             cv2.line(img, (x, 0), (x, h), _rgb(base * 0.78), 2)
-    win_w = float(rng.uniform(0.35, 0.6)) * bay_m
-    win_h = float(rng.uniform(0.45, 0.62)) * floor_height_m
-    frame = rng.uniform(20, 240, 3)
-    glass = rng.uniform([40, 55, 70], [90, 110, 130])
-    balcony = family in (1, 2) and rng.random() < 0.5
-    shutters = family in (0, 1) and rng.random() < 0.4
-    shutter_color = rng.uniform(40, 200, 3)
-    for fy in range(2):
-        for bx in range(2):
-            cx = (bx + 0.5) * bay_m * PX_PER_M
-            top = fy * floor_height_m * PX_PER_M + (floor_height_m - win_h) * 0.45 * PX_PER_M
-            x0, x1 = round(cx - win_w / 2 * PX_PER_M), round(cx + win_w / 2 * PX_PER_M)
-            y0, y1 = round(top), round(top + win_h * PX_PER_M)
-            if family == 4:  # glass: full-height panels with mullions
-                x0, x1 = round(bx * bay_m * PX_PER_M) + 3, round((bx + 1) * bay_m * PX_PER_M) - 3
-                y0, y1 = (
-                    round(fy * floor_height_m * PX_PER_M) + 6,
-                    round((fy + 1) * floor_height_m * PX_PER_M) - 10,
-                )
-            pane = glass + rng.uniform(-15, 25)
-            grad = np.linspace(1.25, 0.8, max(1, y1 - y0))[:, None, None]
-            img[y0:y1, x0:x1] = pane * grad
-            if rng.random() < 0.5:  # curtains
-                cw = round((x1 - x0) * rng.uniform(0.2, 0.45))
-                img[y0:y1, x0 : x0 + cw] = rng.uniform(120, 230, 3)
-            cv2.rectangle(img, (x0, y0), (x1, y1), _rgb(frame), 3)
-            cv2.line(img, ((x0 + x1) // 2, y0), ((x0 + x1) // 2, y1), _rgb(frame), 2)
-            cv2.line(img, (x0, (y0 + y1) // 2), (x1, (y0 + y1) // 2), _rgb(frame), 2)
-            cv2.rectangle(img, (x0 - 4, y1), (x1 + 4, y1 + 6), _rgb(base * 0.6 + 60), -1)
-            if shutters:
-                sw = (x1 - x0) // 3
-                for sx in (x0 - sw - 2, x1 + 2):
-                    cv2.rectangle(img, (sx, y0), (sx + sw, y1), _rgb(shutter_color), -1)
-                    for yy in range(y0, y1, 6):
-                        cv2.line(img, (sx, yy), (sx + sw, yy), _rgb(shutter_color * 0.7), 1)
-            if balcony and fy == 1:
-                by = y1 + 2
-                cv2.rectangle(img, (x0 - 12, by - 30), (x1 + 12, by), _rgb(frame * 0.5), 2)
-                for xx in range(x0 - 12, x1 + 12, 8):
-                    cv2.line(img, (xx, by - 30), (xx, by), _rgb(frame * 0.5), 1)
-    if family == 4:
-        img = cv2.GaussianBlur(img, (3, 3), 0)
-    else:
-        _weathering(img, rng, base)
-    return FacadeTile(_finish(img, rng), 2 * bay_m, 2 * floor_height_m)
+
+
+def _window(
+    img: NDArray,
+    box: tuple[int, int, int, int],
+    glass: NDArray,
+    frame: NDArray,
+    rng: np.random.Generator,
+) -> None:
+    """A framed window with this cell's own pane shade, curtains and blinds (in place)."""
+    x0, y0, x1, y1 = box
+    pane = glass + rng.uniform(-15, 25)
+    img[y0:y1, x0:x1] = pane * np.linspace(1.25, 0.8, max(1, y1 - y0))[:, None, None]
+    if rng.random() < 0.6:  # curtains, on one side or both
+        cw = round((x1 - x0) * rng.uniform(0.15, 0.4))
+        color = rng.uniform(120, 230, 3)
+        side = rng.integers(0, 3)
+        if side != 1:
+            img[y0:y1, x0 : x0 + cw] = color
+        if side != 0:
+            img[y0:y1, x1 - cw : x1] = color
+    if rng.random() < 0.3:  # blinds pulled part way down
+        yb = y0 + round((y1 - y0) * rng.uniform(0.2, 0.8))
+        img[y0:yb, x0:x1] = rng.uniform(170, 235)
+        for yy in range(y0, yb, 5):
+            cv2.line(img, (x0, yy), (x1, yy), _rgb(np.full(3, 140.0)), 1)
+    cv2.rectangle(img, (x0, y0), (x1, y1), _rgb(frame), 3)
+    cv2.line(img, ((x0 + x1) // 2, y0), ((x0 + x1) // 2, y1), _rgb(frame), 2)
+    cv2.line(img, (x0, (y0 + y1) // 2), (x1, (y0 + y1) // 2), _rgb(frame), 2)
 
 
 def _weathering(img: NDArray, rng: np.random.Generator, base: NDArray) -> None:
-    """Stains, patches and a drainpipe: the irregular detail real walls have."""
+    """Stains, patches and now and then a drainpipe: the irregular detail real walls have."""
     h, w = img.shape[:2]
-    for _ in range(int(rng.integers(25, 45))):
+    for _ in range(int(rng.integers(6, 14))):
         x, y = int(rng.integers(0, w)), int(rng.integers(0, h))
         axes = (int(rng.integers(3, 14)), int(rng.integers(3, 14)))
         shade = base * float(rng.uniform(0.6, 1.25))
         cv2.ellipse(img, (x, y), axes, float(rng.uniform(0, 180)), 0, 360, _rgb(shade), -1)
-    x = int(rng.integers(0, w))
-    cv2.line(img, (x, 0), (x, h), _rgb(base * 0.5), 5)
-    for y in range(int(rng.integers(0, 40)), h, 90):
-        cv2.rectangle(img, (x - 6, y), (x + 6, y + 6), _rgb(base * 0.4), -1)
+    if rng.random() < 0.15:
+        x = int(rng.integers(6, w - 6))
+        cv2.line(img, (x, 0), (x, h), _rgb(base * 0.5), 5)
+        for y in range(int(rng.integers(0, 40)), h, 90):
+            cv2.rectangle(img, (x - 6, y), (x + 6, y + 6), _rgb(base * 0.4), -1)
 
 
 SHOP_WIDTH_M = 7.0  # every shopfront tile covers this much wall (they share one atlas)
