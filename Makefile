@@ -7,7 +7,7 @@ JOBS ?= 2
 
 demo:
 	@scripts/setup.sh
-	$(VENV)/bin/vlocbench demo --out out/demo
+	$(VENV)/bin/vlocbench run experiments/demo.yaml --workers $(JOBS)
 
 test:
 	@scripts/setup.sh test

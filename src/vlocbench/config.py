@@ -105,7 +105,10 @@ def from_dict(cls: type[T], data: Any, field: str = "") -> T:
         return cls(**kwargs)
     except ConfigError as exc:
         if field and not exc.field.startswith(field):
-            raise ConfigError(f"{field}.{exc.field}", exc.reason) from None
+            # a dataclass names its fields from its own root ("illumination.k"): don't repeat it
+            last = field.rsplit(".", 1)[-1]
+            tail = exc.field.removeprefix(f"{last}.")
+            raise ConfigError(f"{field}.{tail}", exc.reason) from None
         raise
 
 

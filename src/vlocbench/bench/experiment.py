@@ -1,0 +1,355 @@
+"""Experiment files: what to run (towns, methods, condition sweeps, repetitions) and its expansion.
+
+An experiment YAML names towns, localization methods and a ``sweep``: a mapping from keys to
+values. A key is a dotted path into :class:`~vlocbench.sim.Conditions` (``illumination.k``,
+``weather.fog_visual_range_m``, ``season``, ``viewpoint``, ``traffic.cars``, ...), into the query
+``camera`` (``camera.intrinsics.fov_deg``, ``camera.extrinsics.yaw_deg``) or ``cameras`` (a rig:
+a list of cameras). A list of values is swept; a scalar is fixed; a list of mappings sweeps
+parameters that stay together (``viewpoint: [{dz_m: 0, pitch_down_deg: 0}, {dz_m: 2, ...}]``).
+Swept keys combine as a cartesian product into *setups*; each setup runs
+
+- a recall episode per (town, method): a ground-truth drive, one repetition (it is deterministic);
+- failure episodes per (town, method): navigation on the fused pose, ``repetitions`` times;
+- the wheel-odometry-only baseline per town (its result depends only on traffic among the
+  conditions, so setups that differ in appearance share it).
+
+Every episode is keyed by the hash of everything that determines its result, so a rerun skips what
+is done and a changed setting is a new episode, never mixed with old results.
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import itertools
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+from vlocbench.bench.episode import EpisodeConfig
+from vlocbench.config import config_hash, from_dict, load_yaml, require, to_dict
+from vlocbench.errors import ConfigError, UnknownNameError
+from vlocbench.loc.localizer import LocalizerConfig
+from vlocbench.loc.mapping import MappingConfig
+from vlocbench.loc.registry import METHODS, MethodConf, method_conf
+from vlocbench.sim import Camera, Conditions, builtin_town_names, gallery_camera
+from vlocbench.sim.scene import SCENE_VERSION
+from vlocbench.sim.town import TownSpec, load_town_spec
+
+EpisodeKind = Literal["recall", "failure", "baseline"]
+_CONDITION_KEYS = tuple(f.name for f in dataclasses.fields(Conditions))
+SWEEP_ROOTS = (*_CONDITION_KEYS, "camera", "cameras")
+
+
+@dataclass(frozen=True)
+class MethodSpec:
+    """A localization method as run by an experiment: a named preset, or its parts spelled out.
+
+    ``name`` labels it in results; it is the preset unless ``features``, ``matcher`` and
+    ``retrieval`` are given (registry names or dotted paths to plugin classes).
+    """
+
+    name: str
+    features: str = ""
+    matcher: str = ""
+    retrieval: str = ""
+    localizer: LocalizerConfig = field(default_factory=LocalizerConfig)
+    mapping: MappingConfig | None = None  # this method's map settings, else the experiment's
+
+    def __post_init__(self) -> None:
+        require(bool(self.name), "methods.name", "must not be empty")
+        parts = (self.features, self.matcher, self.retrieval)
+        require(
+            all(parts) or not any(parts),
+            f"methods.{self.name}",
+            "give all of features, matcher and retrieval, or none (a preset)",
+        )
+        if not any(parts) and self.name not in METHODS:
+            raise UnknownNameError("method", self.name, METHODS)
+
+    @property
+    def conf(self) -> MethodConf:
+        if self.features:
+            return MethodConf(self.features, self.matcher, self.retrieval)
+        return method_conf(self.name)
+
+
+@dataclass(frozen=True)
+class GallerySpec:
+    """The gallery drive: on the true pose at ``speed_mps``, an image every ``spacing_m`` from
+    ``camera`` (the paper's: 800x600, FOV 90, facing right), which is also the default query
+    camera."""
+
+    spacing_m: float = 2.0
+    speed_mps: float = 8.0
+    conditions: Conditions = field(default_factory=Conditions)
+    camera: Camera = field(default_factory=gallery_camera)
+
+    def __post_init__(self) -> None:
+        require(0.5 <= self.spacing_m <= 20, "gallery.spacing_m", "must be in [0.5, 20] m")
+        require(0.5 <= self.speed_mps <= 20, "gallery.speed_mps", "must be in [0.5, 20] m/s")
+
+
+@dataclass(frozen=True)
+class Setup:
+    """One combination of swept values: the query conditions and cameras."""
+
+    label: str  # "illumination.k=3, season=winter"; "default" when nothing is swept
+    levels: tuple[tuple[str, Any], ...]  # (key, value) of each swept key, in sweep order
+    conditions: Conditions
+    cameras: tuple[Camera, ...]
+
+
+@dataclass(frozen=True)
+class ExperimentSpec:
+    name: str
+    towns: tuple[str, ...]
+    methods: tuple[MethodSpec, ...]
+    sweep: tuple[tuple[str, Any], ...] = ()  # (key, value or list of levels), as in the file
+    repetitions: int = 5
+    seed: int = 0
+    recall: bool = True
+    failure: bool = True
+    baseline: bool = True
+    episode: EpisodeConfig = field(default_factory=EpisodeConfig)
+    mapping: MappingConfig = field(default_factory=MappingConfig)
+    gallery: GallerySpec = field(default_factory=GallerySpec)
+    route_length_m: float = 0.0  # > 0: drive only the first this-many metres of each town's route
+    output: str = ""  # default: out/NAME
+    cache: str = "out/cache"  # galleries and maps, shared between experiments
+
+    def __post_init__(self) -> None:
+        require(bool(self.name.strip()), "name", "must not be empty")
+        require(len(self.towns) > 0, "towns", "needs at least one town")
+        require(self.repetitions >= 1, "repetitions", "must be >= 1")
+        require(
+            self.route_length_m == 0 or self.route_length_m >= 50,
+            "route_length_m",
+            "must be 0 (the whole route) or >= 50 m",
+        )
+        require(
+            self.recall or self.failure or self.baseline,
+            "recall/failure/baseline",
+            "all false: nothing to run",
+        )
+        require(
+            len(self.methods) > 0 or not (self.recall or self.failure),
+            "methods",
+            "recall and failure episodes need at least one method",
+        )
+        names = [m.name for m in self.methods]
+        require(len(set(names)) == len(names), "methods", f"duplicate names in {names}")
+
+    @property
+    def output_dir(self) -> Path:
+        return Path(self.output or f"out/{self.name}")
+
+    @property
+    def spec_hash(self) -> str:
+        return config_hash(self)
+
+
+@dataclass(frozen=True)
+class EpisodeTask:
+    """One episode to run: everything a worker needs, and the key of its result."""
+
+    kind: EpisodeKind
+    town: str
+    setup: Setup
+    method: MethodSpec | None
+    map_dir: str | None
+    repetition: int
+    episode: EpisodeConfig
+    route_length_m: float = 0.0  # 0: the whole route
+    key: str = ""
+
+    @property
+    def method_name(self) -> str:
+        return self.method.name if self.method else "odometry"
+
+
+def _town_spec(name: str) -> TownSpec:
+    if Path(name).suffix not in (".yaml", ".yml") and name not in builtin_town_names():
+        raise UnknownNameError("town", name, builtin_town_names())
+    return load_town_spec(name)
+
+
+def _method(item: Any, index: int) -> MethodSpec:
+    if isinstance(item, str):
+        return MethodSpec(item)
+    if isinstance(item, dict):
+        return from_dict(MethodSpec, item, f"methods[{index}]")
+    raise ConfigError(f"methods[{index}]", "expected a preset name or a mapping")
+
+
+def load_experiment(source: str | Path | Mapping[str, Any]) -> ExperimentSpec:
+    """An experiment from a YAML file (or its parsed mapping), validated and resolved."""
+    data = load_yaml(source) if isinstance(source, str | Path) else dict(source)
+    if not isinstance(data, dict):
+        raise ConfigError(str(source), "an experiment file must be a mapping")
+    data = dict(data)
+    methods = data.pop("methods", [])
+    sweep = data.pop("sweep", {}) or {}
+    if not isinstance(methods, list):
+        raise ConfigError("methods", "expected a list of preset names or mappings")
+    if not isinstance(sweep, dict):
+        raise ConfigError("sweep", "expected a mapping of keys to values or lists of values")
+    towns = data.get("towns")
+    if isinstance(towns, str):
+        data["towns"] = [towns]
+    if "name" not in data and isinstance(source, str | Path):
+        data["name"] = Path(source).stem
+    data["methods"] = [_method(m, i) for i, m in enumerate(methods)]
+    data["sweep"] = [(str(k), v) for k, v in sweep.items()]
+    spec = from_dict(ExperimentSpec, data)
+    for town in spec.towns:
+        _town_spec(town)
+    setups(spec)  # validates every key and level now, not in a worker
+    return spec
+
+
+def _set(tree: dict[str, Any], dotted: str, value: Any) -> None:
+    *parents, leaf = dotted.split(".")
+    for p in parents:
+        node = tree.setdefault(p, {})
+        if not isinstance(node, dict):
+            raise ConfigError(f"sweep.{dotted}", f"{p} is set to a value and also has sub-keys")
+        tree = node
+    if isinstance(value, dict) and isinstance(tree.get(leaf), dict):
+        tree[leaf].update(value)
+    else:
+        tree[leaf] = value
+
+
+def _levels(key: str, value: Any) -> list[Any]:
+    """The levels a sweep key takes: a list sweeps, anything else is one fixed level."""
+    if key == "cameras":  # a rig is itself a list: a list of rigs sweeps, one rig is fixed
+        swept = isinstance(value, list) and bool(value) and all(isinstance(v, list) for v in value)
+        levels = value if swept else [value]
+    else:
+        levels = value if isinstance(value, list) else [value]
+    if not levels or levels == [[]]:
+        raise ConfigError(f"sweep.{key}", "an empty list expands to zero runs")
+    return levels
+
+
+def _label(key: str, value: Any) -> str:
+    if isinstance(value, dict):
+        return f"{key}(" + ", ".join(f"{k}={v}" for k, v in value.items()) + ")"
+    if key == "cameras":
+        return f"cameras={len(value)}"
+    return f"{key}={value}"
+
+
+def _camera(base: Camera, overrides: Any, name: str, field: str) -> Camera:
+    """``base`` with the keys of ``overrides`` (a Camera mapping, nested keys merged) changed."""
+    if not isinstance(overrides, dict):
+        raise ConfigError(field, "expected a mapping of camera settings")
+    merged = {**to_dict(base), "name": name}
+    for k, v in overrides.items():
+        merged[k] = (
+            {**merged[k], **v} if isinstance(v, dict) and isinstance(merged.get(k), dict) else v
+        )
+    return from_dict(Camera, merged, field)
+
+
+def setups(spec: ExperimentSpec) -> list[Setup]:
+    """The cartesian product of the swept keys, as resolved setups (validated)."""
+    keys = []
+    for key, value in spec.sweep:
+        root = key.split(".")[0]
+        if root not in SWEEP_ROOTS:
+            raise UnknownNameError("sweep key", key, SWEEP_ROOTS)
+        keys.append((key, _levels(key, value)))
+    swept = [k for k, levels in keys if len(levels) > 1]
+    out = []
+    for combo in itertools.product(*(levels for _, levels in keys)):
+        tree: dict[str, Any] = {}
+        for (key, _), value in zip(keys, combo):
+            _set(tree, key, copy.deepcopy(value))
+        cams = tree.pop("cameras", None)
+        cam = tree.pop("camera", None)
+        require(cams is None or cam is None, "sweep", "set either camera or cameras, not both")
+        conditions = from_dict(Conditions, tree, "sweep")
+        if cams is not None:
+            if not isinstance(cams, list) or not cams:
+                raise ConfigError("sweep.cameras", "expected a list of cameras (a rig)")
+            cameras = tuple(
+                _camera(spec.gallery.camera, c, f"cam{i}", f"sweep.cameras[{i}]")
+                for i, c in enumerate(cams)
+            )
+            names = [c.name for c in cameras]
+            require(len(set(names)) == len(names), "sweep.cameras", f"duplicate names {names}")
+        else:
+            cameras = (_camera(spec.gallery.camera, {"name": "query", **(cam or {})}, "query",
+                               "sweep.camera"),)  # fmt: skip
+        levels = tuple((k, v) for (k, _), v in zip(keys, combo) if k in swept)
+        label = ", ".join(_label(k, v) for k, v in levels) or "default"
+        out.append(Setup(label, levels, conditions, cameras))
+    labels = [s.label for s in out]
+    require(len(set(labels)) == len(labels), "sweep", "two setups have the same levels")
+    return out
+
+
+def gallery_key(town: str, spec: ExperimentSpec) -> str:
+    """What determines a town's gallery: the town, the route, the drive and the scene version."""
+    return config_hash(
+        (to_dict(_town_spec(town)), spec.route_length_m, spec.gallery, SCENE_VERSION), 10
+    )
+
+
+def expand(spec: ExperimentSpec, map_dirs: Mapping[tuple[str, str], str]) -> list[EpisodeTask]:
+    """Every episode of the experiment, keyed; ``map_dirs[(town, method name)]`` gives the maps.
+
+    Baseline episodes are listed once per distinct key (setups that differ only in appearance
+    share one).
+    """
+    tasks: dict[str, EpisodeTask] = {}
+    for town in spec.towns:
+        town_dict = to_dict(_town_spec(town))
+        for setup in setups(spec):
+            jobs: list[tuple[EpisodeKind, MethodSpec | None, int]] = []
+            for method in spec.methods:
+                if spec.recall:
+                    jobs.append(("recall", method, 0))
+                if spec.failure:
+                    jobs += [("failure", method, r) for r in range(spec.repetitions)]
+            if spec.baseline:
+                jobs += [("baseline", None, r) for r in range(spec.repetitions)]
+            for kind, method, rep in jobs:
+                config = dataclasses.replace(
+                    spec.episode,
+                    mode="ground_truth" if kind == "recall" else "navigate",
+                    seed=spec.seed + rep,
+                )
+                map_dir = map_dirs[(town, method.name)] if method else None
+                world = (
+                    {"traffic": setup.conditions.traffic}
+                    if method is None  # the baseline renders nothing
+                    else {"conditions": setup.conditions, "cameras": setup.cameras}
+                )
+                key = config_hash(
+                    {
+                        "kind": kind,
+                        "town": town_dict,
+                        "scene": SCENE_VERSION,
+                        "route_length_m": spec.route_length_m,
+                        "world": world,
+                        "method": method,
+                        "map": Path(map_dir).name if map_dir else None,
+                        "gallery": Path(map_dir).parent.name if map_dir else None,
+                        "episode": config,
+                    },
+                    16,
+                )
+                task = EpisodeTask(
+                    kind, town, setup, method, map_dir, rep, config, spec.route_length_m, key
+                )
+                tasks.setdefault(key, task)
+    return list(tasks.values())
+
+
+def sweep_keys(spec: ExperimentSpec) -> list[str]:
+    """The keys that take more than one level (the axes of the result tables)."""
+    return [k for k, v in spec.sweep if len(_levels(k, v)) > 1]

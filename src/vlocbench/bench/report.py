@@ -1,0 +1,408 @@
+"""Reports of a run: the paper's tables (Markdown and LaTeX), figures (PNG) and one self-contained
+HTML page, written to ``OUTPUT/report/``.
+
+- Failure rate per method and setup, with its bootstrap 95 % interval, the odometry-only row and
+  the computation time (the paper's Table 2; its viewpoint and weather tables have the same shape).
+- Recall at (0.25 m, 2 deg) / (0.5 m, 5 deg) / (5 m, 10 deg) of the ground-truth drive, raw and of
+  the fused pose (its Table 5).
+- Failure rate against the swept level with the odometry line; failure rate against recall (its
+  Fig. 5); failure sites on the town map (its Fig. 6); computation time per method.
+- Example query images per setup beside the gallery view from the same pose.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import json
+import sqlite3
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+
+from vlocbench.bench.store import DB_FILE, EpisodeRow, StoreError, _episode_row
+from vlocbench.bench.summary import BASELINE, Summary, spec_from_stored, summarize
+
+REPORT_DIR = "report"
+COLORS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2", "#17becf")
+Table = tuple[list[str], list[list[str]]]  # header, rows
+
+
+@dataclass(frozen=True)
+class ReportFiles:
+    html: Path
+    markdown: Path
+    latex: Path
+    figures: tuple[Path, ...]
+
+
+def read_run(output_dir: str | Path) -> tuple[dict[str, Any], list[EpisodeRow]]:
+    """The latest run's resolved spec and episodes, read-only (a run may be writing meanwhile)."""
+    db_path = Path(output_dir) / DB_FILE
+    if not db_path.is_file():
+        raise StoreError(f"{output_dir} holds no vlocbench results ({DB_FILE} is missing)")
+    try:
+        db = sqlite3.connect(f"file:{db_path}?mode=ro", uri=True)
+        try:
+            last = db.execute(
+                "SELECT run_hash, spec FROM runs ORDER BY started DESC LIMIT 1"
+            ).fetchone()
+            if last is None:
+                raise StoreError(f"{output_dir} has no run yet")
+            cur = db.execute(
+                "SELECT e.* FROM episodes e JOIN run_episodes r ON e.key = r.key "
+                "WHERE r.run_hash = ? ORDER BY e.key",
+                (last[0],),
+            )
+            rows = [_episode_row(*row) for row in cur]
+        finally:
+            db.close()
+    except sqlite3.DatabaseError as exc:
+        raise StoreError(f"{db_path} is not a vlocbench store: {exc}") from None
+    return json.loads(last[1]), rows
+
+
+# -- tables ---------------------------------------------------------------------------------------
+def _short(summary: Summary, label: str) -> str:
+    """A setup's column header: its levels without the dotted prefixes."""
+    setup = next(s for s in summary.setups if s.label == label)
+    if not setup.levels:
+        return "default"
+    parts = []
+    for key, value in setup.levels:
+        name = key.split(".")[-1]
+        if isinstance(value, dict):
+            parts.append(", ".join(f"{k}={v}" for k, v in value.items()))
+        elif key == "cameras":
+            parts.append(f"{len(value)} cameras")
+        else:
+            parts.append(f"{name}={value}")
+    return "; ".join(parts)
+
+
+def _fmt(value: float, digits: int = 1) -> str:
+    return "–" if value is None or not np.isfinite(value) else f"{value:.{digits}f}"
+
+
+def failure_table(summary: Summary, town: str) -> Table:
+    header = ["method", *(_short(summary, s.label) for s in summary.setups), "CT (ms)"]
+    rows = []
+    for method in summary.methods:
+        row = ["odometry only" if method == BASELINE else method]
+        cts = []
+        for s in summary.setups:
+            c = summary.cell(town, method, s.label)
+            if c is None or c.failure is None:
+                row.append("–")
+                continue
+            f = c.failure
+            row.append(f"{_fmt(f.mean)} [{_fmt(f.low)}, {_fmt(f.high)}]")
+            cts.append(c.ct_s)
+        finite = [v for v in cts if np.isfinite(v)]
+        row.append(_fmt(1000 * float(np.mean(finite)), 0) if finite else "–")
+        rows.append(row)
+    return header, rows
+
+
+def recall_table(summary: Summary, town: str, fused: bool = False) -> Table:
+    header = ["method", *(_short(summary, s.label) for s in summary.setups)]
+    rows = []
+    for method in (m for m in summary.methods if m != BASELINE):
+        row = [method]
+        for s in summary.setups:
+            c = summary.cell(town, method, s.label)
+            r = None if c is None else (c.recall_ekf if fused else c.recall)
+            row.append(" / ".join(_fmt(100 * v) for v in r[:3]) if r else "–")
+        rows.append(row)
+    return header, rows
+
+
+def _markdown(table: Table) -> str:
+    header, rows = table
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    lines += ["| " + " | ".join(r) + " |" for r in rows]
+    return "\n".join(lines)
+
+
+def _latex_escape(text: str) -> str:
+    for a, b in (("\\", r"\textbackslash{}"), ("_", r"\_"), ("%", r"\%"), ("&", r"\&"),
+                 ("#", r"\#"), ("–", "--")):  # fmt: skip
+        text = text.replace(a, b)
+    return text
+
+
+def _latex(table: Table, caption: str) -> str:
+    header, rows = table
+    body = [" & ".join(_latex_escape(c) for c in r) + r" \\" for r in rows]
+    return "\n".join([
+        r"\begin{table}[t]", r"\centering", rf"\caption{{{_latex_escape(caption)}}}",
+        r"\resizebox{\linewidth}{!}{%", r"\begin{tabular}{l" + "c" * (len(header) - 1) + "}",
+        r"\toprule", " & ".join(_latex_escape(h) for h in header) + r" \\", r"\midrule",
+        *body, r"\bottomrule", r"\end{tabular}}", r"\end{table}",
+    ])  # fmt: skip
+
+
+def _tables(summary: Summary) -> list[tuple[str, Table]]:
+    out = []
+    for town in summary.towns:
+        name = summary.town_names[town]
+        out.append((f"{name}: failure rate F (failures/km, mean [bootstrap 95 % CI] over "
+                    f"{summary.spec.repetitions} repetitions) and computation time per query",
+                    failure_table(summary, town)))  # fmt: skip
+        if summary.spec.recall and summary.spec.methods:
+            out.append((f"{name}: recall (%) at (0.25 m, 2°) / (0.5 m, 5°) / (5 m, 10°), "
+                        "ground-truth drive, raw localization", recall_table(summary, town)))  # fmt: skip
+            out.append((f"{name}: recall (%) of the fused (EKF) pose at every step, same drive",
+                        recall_table(summary, town, fused=True)))  # fmt: skip
+    return out
+
+
+# -- figures --------------------------------------------------------------------------------------
+def _x_axis(summary: Summary) -> tuple[list[float], list[str], str]:
+    values = summary.level_values()
+    labels = [_short(summary, s.label) for s in summary.setups]
+    if values is not None:
+        return values, [f"{v:g}" for v in values], summary.axis[0]
+    return list(range(len(labels))), labels, ", ".join(summary.axis) or "setup"
+
+
+def _save(fig: plt.Figure, path: Path) -> Path:
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def failure_figure(summary: Summary, town: str, path: Path) -> Path:
+    x, ticks, xlabel = _x_axis(summary)
+    fig, ax = plt.subplots(figsize=(7, 4))
+    for method, color in zip(summary.methods, COLORS * 4):
+        cells = [summary.cell(town, method, s.label) for s in summary.setups]
+        f = [c.failure if c else None for c in cells]
+        mean = np.array([v.mean if v else np.nan for v in f])
+        low = np.array([v.low if v else np.nan for v in f])
+        high = np.array([v.high if v else np.nan for v in f])
+        if method == BASELINE:
+            ax.plot(x, mean, "--", color="0.4", label="odometry only")
+            continue
+        ax.errorbar(x, mean, yerr=[mean - low, high - mean], fmt="o-", color=color, capsize=3,
+                    label=method)  # fmt: skip
+    ax.set_xticks(
+        x, ticks, rotation=30 if len(ticks) > 6 else 0, ha="right" if len(ticks) > 6 else "center"
+    )
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel("failure rate F (1/km)")
+    ax.set_ylim(bottom=0)
+    ax.set_title(f"{summary.town_names[town]}: failure rate (95 % CI)")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    return _save(fig, path)
+
+
+def failure_vs_recall_figure(summary: Summary, path: Path) -> Path:
+    fig, ax = plt.subplots(figsize=(6, 4.5))
+    markers = "osD^v<>"
+    for method, color in zip(summary.methods, COLORS * 4):
+        if method == BASELINE:
+            continue
+        for town, marker in zip(summary.towns, markers * 4):
+            pts = [(100 * c.recall[0], c.failure.mean) for s in summary.setups
+                   if (c := summary.cell(town, method, s.label)) and c.recall and c.failure]  # fmt: skip
+            if pts:
+                r, f = zip(*pts)
+                label = (
+                    method if len(summary.towns) == 1 else f"{method}, {summary.town_names[town]}"
+                )
+                ax.scatter(r, f, color=color, marker=marker, label=label)
+    ax.set_xlabel("recall at (0.25 m, 2°), %")
+    ax.set_ylabel("failure rate F (1/km)")
+    ax.set_xlim(0, 100)
+    ax.set_ylim(bottom=0)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    ax.set_title("failure rate against recall")
+    return _save(fig, path)
+
+
+def crash_sites_figure(summary: Summary, town: str, town_obj: Any, path: Path) -> Path:
+    from vlocbench.sim.birdseye import town_map_figure
+
+    fig = town_map_figure(town_obj, route=True)
+    ax = fig.axes[0]
+    for method, color in zip(summary.methods, COLORS * 4):
+        cells = {c.keys: c for s in summary.setups if (c := summary.cell(town, method, s.label))}
+        xy = [p for c in cells.values() for p in c.sites_xy]  # shared baselines counted once
+        if not xy:
+            continue
+        xs, ys = zip(*xy)
+        if method == BASELINE:
+            ax.scatter(
+                xs, ys, marker=".", s=18, c="0.35", zorder=9, label=f"odometry only ({len(xy)})"
+            )
+        else:
+            ax.scatter(xs, ys, marker="x", s=36, c=color, zorder=10, label=f"{method} ({len(xy)})")
+    ax.legend(loc="upper right", fontsize=7)
+    ax.set_title(f"{summary.town_names[town]}: failure sites, all setups and repetitions")
+    return _save(fig, path)
+
+
+def computation_time_figure(summary: Summary, path: Path) -> Path:
+    methods = [m for m in summary.methods if m != BASELINE]
+    fig, ax = plt.subplots(figsize=(6, 3.5))
+    width = 0.8 / max(1, len(summary.towns))
+    for k, town in enumerate(summary.towns):
+        ct = []
+        for m in methods:
+            values = [c.ct_s for s in summary.setups if (c := summary.cell(town, m, s.label))]
+            finite = [v for v in values if np.isfinite(v)]
+            ct.append(1000 * float(np.mean(finite)) if finite else 0.0)
+        ax.bar(np.arange(len(methods)) + k * width, ct, width, label=summary.town_names[town])
+    ax.set_xticks(np.arange(len(methods)) + width * (len(summary.towns) - 1) / 2, methods)
+    ax.set_ylabel("computation time per query (ms)")
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3, axis="y")
+    return _save(fig, path)
+
+
+# -- example images -------------------------------------------------------------------------------
+def example_images(
+    summary: Summary, town: str, width_px: int = 320
+) -> list[tuple[str, bytes, bytes]]:
+    """(setup label, query JPEG, gallery-view JPEG) per setup, from one pose a third of the way
+    along the route: what the localizer sees against what the map was built from."""
+    import cv2
+
+    from vlocbench.bench.runner import _route, _town
+    from vlocbench.sim import Simulator
+
+    spec = summary.spec
+    route = _route(town, spec.route_length_m)
+    j = len(route) // 3
+    pose = (float(route.xy[j, 0]), float(route.xy[j, 1]), float(route.yaw_rad[j]))
+
+    def jpeg(image: np.ndarray) -> bytes:
+        h, w = image.shape[:2]
+        small = cv2.resize(image, (width_px, round(h * width_px / w)), interpolation=cv2.INTER_AREA)
+        return cv2.imencode(
+            ".jpg", cv2.cvtColor(small, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, 85]
+        )[1].tobytes()
+
+    out = []
+    sim = Simulator(_town(town), spec.gallery.conditions)
+    try:
+        sim.teleport(*pose)
+        gallery_view = jpeg(sim.render([spec.gallery.camera])[0].image)
+        for s in summary.setups:
+            if s.conditions.traffic != sim.conditions.traffic:
+                sim.close()
+                sim = Simulator(_town(town), s.conditions)
+            else:
+                sim.set_conditions(s.conditions)
+            sim.teleport(*pose)
+            out.append((s.label, jpeg(sim.render(s.cameras[:1])[0].image), gallery_view))
+    finally:
+        sim.close()
+    return out
+
+
+# -- the report -----------------------------------------------------------------------------------
+def _html_table(table: Table) -> str:
+    header, rows = table
+    head = "".join(f"<th>{html.escape(h)}</th>" for h in header)
+    body = "".join(
+        "<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in r) + "</tr>" for r in rows
+    )
+    return f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
+
+
+def _img(data: bytes, mime: str, alt: str) -> str:
+    return (
+        f'<img alt="{html.escape(alt)}" src="data:{mime};base64,{base64.b64encode(data).decode()}">'
+    )
+
+
+_CSS = """body{font-family:system-ui,sans-serif;max-width:1100px;margin:2em auto;padding:0 1em;color:#222}
+table{border-collapse:collapse;margin:.5em 0 1.5em;font-size:13px}th,td{border:1px solid #ccc;padding:3px 7px;text-align:center}
+th{background:#f3f3f3}td:first-child{text-align:left}img{max-width:100%}figure{display:inline-block;margin:4px}
+figcaption{font-size:12px;color:#555}.err{color:#b00}pre{background:#f7f7f7;padding:.5em;font-size:12px;overflow-x:auto}"""
+
+
+def write_report(
+    output_dir: str | Path, examples: bool = True, log: Callable[[str], None] = print
+) -> ReportFiles:
+    """Write the tables, figures and the HTML page of the latest run in ``output_dir``."""
+    from vlocbench.bench.runner import _town
+
+    stored, rows = read_run(output_dir)
+    summary = summarize(spec_from_stored(stored), rows)
+    out = Path(output_dir) / REPORT_DIR
+    out.mkdir(parents=True, exist_ok=True)
+    tables = _tables(summary)
+    md = out / "tables.md"
+    md.write_text("\n\n".join(f"**{caption}**\n\n{_markdown(t)}" for caption, t in tables) + "\n")
+    tex = out / "tables.tex"
+    tex.write_text(
+        "% needs \\usepackage{booktabs, graphicx}\n"
+        + "\n\n".join(_latex(t, c) for c, t in tables)
+        + "\n"
+    )
+    figures: list[Path] = []
+    for town in summary.towns:
+        name = summary.town_names[town]
+        figures.append(failure_figure(summary, town, out / f"failure_rate_{name}.png"))
+        figures.append(
+            crash_sites_figure(summary, town, _town(town), out / f"failure_sites_{name}.png")
+        )
+    if summary.spec.methods:
+        if summary.spec.recall and summary.spec.failure:
+            figures.append(failure_vs_recall_figure(summary, out / "failure_vs_recall.png"))
+        figures.append(computation_time_figure(summary, out / "computation_time.png"))
+    parts = [
+        f"<h1>vlocbench: {html.escape(summary.spec.name)}</h1>",
+        f"<p>{len(rows)} episodes ({len(summary.errors)} with errors); experiment hash "
+        f"<code>{summary.spec.spec_hash}</code>; towns: {', '.join(summary.town_names[t] for t in summary.towns)}; "
+        f"methods: {', '.join(m.name for m in summary.spec.methods) or 'none'}; "
+        f"{len(summary.setups)} setup(s); {summary.spec.repetitions} repetition(s).</p>",
+    ]
+    for caption, table in tables:
+        parts += [f"<h3>{html.escape(caption)}</h3>", _html_table(table)]
+    parts.append("<h2>Figures</h2>")
+    parts += [
+        f"<figure>{_img(p.read_bytes(), 'image/png', p.stem)}<figcaption>{p.stem}</figcaption></figure>"
+        for p in figures
+    ]
+    if examples:
+        parts.append("<h2>Query images and the gallery view from the same pose</h2>")
+        for town in summary.towns:
+            log(f"report: rendering example images of {summary.town_names[town]}")
+            for label, query, gallery in example_images(summary, town):
+                parts.append(
+                    f"<div><h4>{html.escape(summary.town_names[town])}: {html.escape(label)}</h4>"
+                    f"<figure>{_img(query, 'image/jpeg', 'query')}<figcaption>query</figcaption></figure>"
+                    f"<figure>{_img(gallery, 'image/jpeg', 'gallery')}<figcaption>gallery</figcaption></figure></div>"
+                )
+    if summary.errors:
+        parts.append("<h2 class='err'>Episodes that ended in an error</h2>")
+        parts += [f"<p>{html.escape(f'{r.town} {r.method} {r.kind} {r.setup} rep {r.repetition}')}</p><pre>{html.escape(r.error or '')}</pre>"
+                  for r in summary.errors]  # fmt: skip
+    page = out / "index.html"
+    page.write_text(f"<!doctype html><html><head><meta charset='utf-8'><title>vlocbench: "
+                    f"{html.escape(summary.spec.name)}</title><style>{_CSS}</style></head><body>"
+                    + "\n".join(parts) + "</body></html>")  # fmt: skip
+    return ReportFiles(page, md, tex, tuple(figures))
+
+
+def summary_lines(summary: Summary) -> Sequence[str]:
+    """The failure-rate table of each town as plain text, for the end of a run."""
+    lines = []
+    for town in summary.towns:
+        lines.append(f"{summary.town_names[town]}:")
+        lines += _markdown(failure_table(summary, town)).splitlines()
+    return lines

@@ -1,0 +1,257 @@
+"""The results store: one SQLite file and one folder of Parquet tables per episode, in the output
+folder; no server.
+
+- ``results.sqlite``: the experiment this folder belongs to, one row per run (a resolved spec and
+  its hash), one row per episode (its key, resolved config and hash, metrics or error), and which
+  episodes each run asked for.
+- ``episodes/KEY/trajectory.parquet`` (per simulation step: time, true pose, EKF pose, speed) and
+  ``localizations.parquet`` (per query: estimate, truth, EKF pose, errors, compute time).
+
+An episode is written in two steps: its tables go to a temporary folder that is renamed into place,
+then its row is committed in one transaction. A kill at any moment leaves either no row (the
+episode reruns; a leftover folder is replaced) or a complete episode. Only the driver writes; a
+lock file keeps a second driver out.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import errno
+import fcntl
+import json
+import os
+import shutil
+import sqlite3
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from vlocbench.bench.records import EpisodeResult
+from vlocbench.errors import VlocbenchError
+
+DB_FILE = "results.sqlite"
+LOCK_FILE = ".lock"
+EPISODES_DIR = "episodes"
+
+_SCHEMA = """
+CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
+CREATE TABLE IF NOT EXISTS runs (
+    run_hash TEXT PRIMARY KEY, started REAL NOT NULL, spec TEXT NOT NULL);
+CREATE TABLE IF NOT EXISTS episodes (
+    key TEXT PRIMARY KEY, kind TEXT NOT NULL, town TEXT NOT NULL, method TEXT NOT NULL,
+    setup TEXT NOT NULL, repetition INTEGER NOT NULL, seed INTEGER NOT NULL,
+    config TEXT NOT NULL, status TEXT NOT NULL, error TEXT, metrics TEXT,
+    wall_s REAL, attempts INTEGER NOT NULL, finished REAL NOT NULL);
+CREATE TABLE IF NOT EXISTS run_episodes (
+    run_hash TEXT NOT NULL, key TEXT NOT NULL, PRIMARY KEY (run_hash, key));
+"""
+
+
+class StoreError(VlocbenchError, RuntimeError):
+    """The output folder cannot take these results (another experiment, in use, disk full)."""
+
+
+@dataclass(frozen=True)
+class EpisodeRow:
+    key: str
+    kind: str
+    town: str
+    method: str
+    setup: str
+    repetition: int
+    seed: int
+    config: dict[str, Any]
+    status: str  # "ok" or "error"
+    error: str | None
+    metrics: dict[str, Any] | None
+    wall_s: float | None
+    attempts: int
+
+
+def _episode_row(*columns: Any) -> EpisodeRow:
+    """An ``episodes`` table row (in schema order) as an EpisodeRow."""
+    *head, config, status, error, metrics, wall_s, attempts, _finished = columns
+    return EpisodeRow(
+        *head,
+        config=json.loads(config),
+        status=status,
+        error=error,
+        metrics=json.loads(metrics) if metrics else None,
+        wall_s=wall_s,
+        attempts=attempts,
+    )
+
+
+def _columns(result: EpisodeResult) -> tuple[dict[str, Any], dict[str, Any]]:
+    tr = result.trajectory
+    trajectory = {f.name: getattr(tr, f.name) for f in dataclasses.fields(tr)}
+    locs = result.localizations
+    names = [f.name for f in dataclasses.fields(locs[0])] if locs else []
+    localizations = {n: [getattr(x, n) for x in locs] for n in names}
+    return trajectory, localizations
+
+
+class ResultStore:
+    """The results of one experiment in ``root``; use as a context manager (holds the lock)."""
+
+    def __init__(self, root: str | Path, experiment: str) -> None:
+        self.root = Path(root)
+        self.experiment = experiment
+        self._lock: Any = None
+        self.db: sqlite3.Connection | None = None
+
+    def __enter__(self) -> ResultStore:
+        try:
+            self.root.mkdir(parents=True, exist_ok=True)
+            self._lock = open(self.root / LOCK_FILE, "w")  # held until close()
+        except OSError as exc:
+            raise StoreError(f"cannot use {self.root} as an output folder: {exc}") from None
+        try:
+            fcntl.flock(self._lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            self._lock.close()
+            raise StoreError(f"{self.root} is in use by another vlocbench run") from None
+        try:
+            self.db = sqlite3.connect(self.root / DB_FILE, isolation_level=None)
+            self.db.execute("PRAGMA journal_mode=WAL")
+            self.db.execute("PRAGMA synchronous=FULL")
+            self.db.executescript(_SCHEMA)
+            row = self.db.execute("SELECT value FROM meta WHERE key='experiment'").fetchone()
+        except sqlite3.DatabaseError as exc:
+            self.close()
+            raise StoreError(f"{self.root / DB_FILE} is not a vlocbench store: {exc}") from None
+        if row is None:
+            self.db.execute("INSERT INTO meta VALUES ('experiment', ?)", (self.experiment,))
+        elif row[0] != self.experiment:
+            other = row[0]
+            self.close()
+            raise StoreError(
+                f"{self.root} holds results of experiment {other!r}, not {self.experiment!r}; "
+                "choose another output folder"
+            )
+        for orphan in (self.root / EPISODES_DIR).glob("*.tmp-*"):  # from a killed driver
+            shutil.rmtree(orphan, ignore_errors=True)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        if self.db is not None:
+            self.db.close()
+            self.db = None
+        if self._lock is not None:
+            self._lock.close()
+            self._lock = None
+
+    @property
+    def _conn(self) -> sqlite3.Connection:
+        if self.db is None:
+            raise StoreError("the store is closed")
+        return self.db
+
+    @contextmanager
+    def _transaction(self, what: str) -> Iterator[sqlite3.Connection]:
+        db = self._conn
+        try:
+            db.execute("BEGIN IMMEDIATE")
+            yield db
+            db.execute("COMMIT")
+        except sqlite3.OperationalError as exc:
+            if db.in_transaction:
+                db.execute("ROLLBACK")
+            raise StoreError(f"could not write {what} to {self.root}: {exc}") from None
+
+    def start_run(self, run_hash: str, spec: dict[str, Any], keys: list[str]) -> None:
+        """Record a run (its resolved spec) and the episodes it consists of."""
+        with self._transaction("the run") as db:
+            db.execute(
+                "INSERT INTO runs VALUES (?, ?, ?) "
+                "ON CONFLICT(run_hash) DO UPDATE SET started = excluded.started",
+                (run_hash, time.time(), json.dumps(spec, sort_keys=True)),
+            )
+            db.executemany(
+                "INSERT OR IGNORE INTO run_episodes VALUES (?, ?)", [(run_hash, k) for k in keys]
+            )
+
+    def done_keys(self) -> set[str]:
+        """Keys of the episodes finished without error."""
+        return {k for (k,) in self._conn.execute("SELECT key FROM episodes WHERE status='ok'")}
+
+    def episode_dir(self, key: str) -> Path:
+        return self.root / EPISODES_DIR / key
+
+    def write_episode(
+        self,
+        row: EpisodeRow,
+        result: EpisodeResult | None,
+    ) -> None:
+        """Write one episode atomically (its tables first, then its row)."""
+        if result is not None:
+            self._write_tables(row.key, result)
+        with self._transaction(f"episode {row.key}") as db:
+            db.execute(
+                "INSERT OR REPLACE INTO episodes VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
+                (
+                    row.key, row.kind, row.town, row.method, row.setup, row.repetition, row.seed,
+                    json.dumps(row.config, sort_keys=True), row.status, row.error,
+                    json.dumps(row.metrics) if row.metrics is not None else None,
+                    row.wall_s, row.attempts, time.time(),
+                ),
+            )  # fmt: skip
+
+    def _write_tables(self, key: str, result: EpisodeResult) -> None:
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        final = self.episode_dir(key)
+        tmp = final.with_name(f"{key}.tmp-{os.getpid()}")
+        trajectory, localizations = _columns(result)
+        try:
+            shutil.rmtree(tmp, ignore_errors=True)
+            tmp.mkdir(parents=True)
+            pq.write_table(pa.table({k: np.asarray(v) for k, v in trajectory.items()}),
+                           tmp / "trajectory.parquet")  # fmt: skip
+            pq.write_table(pa.table(localizations), tmp / "localizations.parquet")
+            if final.exists():  # left by an attempt killed before its row was committed
+                shutil.rmtree(final)
+            os.replace(tmp, final)
+        except OSError as exc:
+            shutil.rmtree(tmp, ignore_errors=True)
+            full = exc.errno in (errno.ENOSPC, errno.EDQUOT)
+            raise StoreError(
+                f"could not write episode {key} to {self.root}"
+                + (" (disk full)" if full else "")
+                + f": {exc}; finished episodes are intact, rerun to resume"
+            ) from None
+
+    def rows(self, run_hash: str | None = None) -> list[EpisodeRow]:
+        """Episodes of ``run_hash`` (default: the latest run), finished or failed."""
+        db = self._conn
+        if run_hash is None:
+            last = db.execute("SELECT run_hash FROM runs ORDER BY started DESC LIMIT 1").fetchone()
+            if last is None:
+                return []
+            run_hash = last[0]
+        cur = db.execute(
+            "SELECT e.* FROM episodes e JOIN run_episodes r ON e.key = r.key "
+            "WHERE r.run_hash = ? ORDER BY e.town, e.method, e.setup, e.kind, e.repetition",
+            (run_hash,),
+        )
+        return [_episode_row(*row) for row in cur]
+
+    def latest_spec(self) -> dict[str, Any] | None:
+        row = self._conn.execute("SELECT spec FROM runs ORDER BY started DESC LIMIT 1").fetchone()
+        return json.loads(row[0]) if row else None
+
+    def read_table(self, key: str, name: str) -> dict[str, np.ndarray]:
+        """One episode's ``trajectory`` or ``localizations`` table as numpy columns."""
+        import pyarrow.parquet as pq
+
+        table = pq.read_table(self.episode_dir(key) / f"{name}.parquet")
+        return {c: table.column(c).to_numpy(zero_copy_only=False) for c in table.column_names}

@@ -1,0 +1,118 @@
+"""Aggregating a run's episodes into the figures of the paper's tables (pure; no I/O).
+
+One :class:`Cell` per (town, method, setup): the failure rate over the repetitions with its
+bootstrap interval, the recall of the ground-truth drive, computation time, fragmentation of the
+failure sites and tracking error. The odometry-only baseline is the method ``odometry``; setups that
+share its key (the same traffic) share its cell.
+"""
+
+from __future__ import annotations
+
+from collections import defaultdict
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from vlocbench.bench.experiment import ExperimentSpec, Setup, load_experiment, setups, sweep_keys
+from vlocbench.bench.metrics import FailureRate, Fragmentation, failure_rate, fragmentation
+from vlocbench.bench.store import EpisodeRow
+from vlocbench.config import to_dict
+
+BASELINE = "odometry"
+
+
+@dataclass(frozen=True)
+class Cell:
+    town: str
+    method: str
+    setup: str
+    failure: FailureRate | None  # None: no failure episodes
+    recall: tuple[float, ...] | None  # raw localization, ground-truth drive
+    recall_ekf: tuple[float, ...] | None
+    ct_s: float  # mean computation time per query (NaN: none)
+    fragmentation: Fragmentation | None
+    tracking_error_m: float
+    sites_xy: tuple[tuple[float, float], ...]  # failure sites of all repetitions
+    errors: int  # episodes that ended in an error (not counted above)
+    keys: frozenset[str]  # the episodes behind this cell (a baseline's serve several setups)
+
+
+@dataclass(frozen=True)
+class Summary:
+    spec: ExperimentSpec
+    towns: tuple[str, ...]  # as given in the experiment (names or YAML paths)
+    town_names: dict[str, str]  # as given -> the town's name
+    methods: tuple[str, ...]  # the experiment's methods, then BASELINE when it ran
+    setups: tuple[Setup, ...]
+    axis: tuple[str, ...]  # the swept keys
+    cells: dict[tuple[str, str, str], Cell]  # (town, method, setup label)
+    errors: tuple[EpisodeRow, ...]
+
+    def cell(self, town: str, method: str, setup: str) -> Cell | None:
+        return self.cells.get((town, method, setup))
+
+    def level_values(self) -> list[float] | None:
+        """The numeric levels of the one swept key, when there is exactly one and it is numeric."""
+        if len(self.axis) != 1:
+            return None
+        values = [s.levels[0][1] for s in self.setups]
+        if all(isinstance(v, int | float) and not isinstance(v, bool) for v in values):
+            return [float(v) for v in values]
+        return None
+
+
+def spec_from_stored(data: dict[str, Any]) -> ExperimentSpec:
+    """The experiment as the store recorded it (``to_dict`` of the resolved spec)."""
+    data = dict(data)
+    data["sweep"] = {k: v for k, v in data.get("sweep", [])}
+    return load_experiment(data)
+
+
+def _mean(values: Sequence[float]) -> float:
+    finite = [v for v in values if v is not None and np.isfinite(v)]
+    return float(np.mean(finite)) if finite else float("nan")
+
+
+def summarize(spec: ExperimentSpec, rows: Sequence[EpisodeRow]) -> Summary:
+    """Aggregate ``rows`` (one run's episodes) by town, method and setup."""
+    the_setups = setups(spec)
+    ok = [r for r in rows if r.status == "ok" and r.metrics is not None]
+    by: dict[tuple[str, str, str], list[EpisodeRow]] = defaultdict(list)
+    traffic_of = {s.label: to_dict(s.conditions.traffic) for s in the_setups}
+    for r in ok:
+        if r.method == BASELINE:  # a baseline serves every setup with its traffic
+            traffic = r.config["setup"]["conditions"]["traffic"]
+            for s in the_setups:
+                if traffic_of[s.label] == traffic:
+                    by[(r.config["town"], BASELINE, s.label)].append(r)
+        else:
+            by[(r.config["town"], r.method, r.setup)].append(r)
+    errors_by: dict[tuple[str, str, str], int] = defaultdict(int)
+    for r in rows:
+        if r.status != "ok":
+            errors_by[(r.config["town"], r.method, r.setup)] += 1
+    cells = {}
+    for key, group in by.items():
+        fail = [r.metrics for r in group if r.kind in ("failure", "baseline")]
+        rec = [r.metrics for r in group if r.kind == "recall"]
+        sites = [s for m in fail for s in m["failure_sites_s_m"]]
+        cells[key] = Cell(
+            *key,
+            failure=failure_rate([m["failures_per_km"] for m in fail]) if fail else None,
+            recall=tuple(rec[0]["recall"]) if rec else None,
+            recall_ekf=tuple(rec[0]["recall_ekf"]) if rec else None,
+            ct_s=_mean([r.metrics["ct_mean_s"] for r in group]),
+            fragmentation=fragmentation(sites) if fail else None,
+            tracking_error_m=_mean([m["tracking_error_mean_m"] for m in fail]),
+            sites_xy=tuple(tuple(xy) for m in fail for xy in m["failure_sites_xy"]),
+            errors=errors_by.get(key, 0),
+            keys=frozenset(r.key for r in group),
+        )
+    methods = tuple(m.name for m in spec.methods) + ((BASELINE,) if spec.baseline else ())
+    town_names = {t: t for t in spec.towns} | {r.config["town"]: r.town for r in rows}
+    return Summary(
+        spec, spec.towns, town_names, methods, tuple(the_setups), tuple(sweep_keys(spec)), cells,
+        tuple(r for r in rows if r.status != "ok"),
+    )  # fmt: skip

@@ -1,0 +1,120 @@
+import dataclasses
+
+import pytest
+
+from vlocbench.bench.experiment import expand, load_experiment, setups
+from vlocbench.errors import ConfigError, UnknownNameError
+
+MAPS = {
+    ("town10", "sift-vlad"): "/cache/maps/g1/sift-vlad-1",
+    ("town10", "orb"): "/cache/maps/g1/o",
+}
+
+
+def _spec(**overrides):
+    data = {"name": "t", "towns": ["town10"], "methods": ["sift-vlad"], "repetitions": 2}
+    return load_experiment({**data, **overrides})
+
+
+def test_sweep_is_a_cartesian_product_with_grouped_levels():
+    spec = _spec(
+        sweep={
+            "illumination.k": [0, 3, 6],
+            "viewpoint": [{"dz_m": 0, "pitch_down_deg": 0}, {"dz_m": 4, "pitch_down_deg": 22.5}],
+            "season": "winter",  # a scalar: fixed, not an axis
+        }
+    )
+    got = setups(spec)
+    assert len(got) == 6
+    assert {s.conditions.season for s in got} == {"winter"}
+    assert got[4].conditions.illumination.k == 6 and got[4].conditions.viewpoint.dz_m == 0
+    assert got[5].conditions.viewpoint.pitch_down_deg == 22.5
+    assert got[1].label == "illumination.k=0, viewpoint(dz_m=4, pitch_down_deg=22.5)"
+
+
+def test_query_cameras_and_rigs_start_from_the_gallery_camera():
+    spec = _spec(
+        gallery={"camera": {"intrinsics": {"width": 320, "height": 240}}},
+        sweep={"camera.extrinsics.yaw_deg": [-90, -60]},
+    )
+    cams = [s.cameras[0] for s in setups(spec)]
+    assert [c.extrinsics.yaw_deg for c in cams] == [-90, -60]
+    assert {(c.intrinsics.width, c.extrinsics.z_m) for c in cams} == {(320, 2.0)}
+    rig = _spec(
+        sweep={
+            "cameras": [
+                [{"name": "r"}],
+                [{"name": "r"}, {"name": "l", "extrinsics": {"yaw_deg": 90}}],
+            ]
+        }
+    )
+    assert [len(s.cameras) for s in setups(rig)] == [1, 2]
+    assert setups(rig)[1].cameras[1].extrinsics.yaw_deg == 90
+
+
+def test_expansion_counts_and_keys():
+    spec = _spec(methods=["sift-vlad", {"name": "orb", "features": "orb-teblid", "matcher": "nn-hamming",
+                                         "retrieval": "vlad"}], sweep={"illumination.k": [0, 6]})  # fmt: skip
+    tasks = expand(spec, MAPS)
+    kinds = [t.kind for t in tasks]
+    # per method and setup: 1 recall + 2 failure; the baseline renders nothing, so k does not
+    # change it: one baseline per repetition serves both setups
+    assert (
+        kinds.count("recall") == 4 and kinds.count("failure") == 8 and kinds.count("baseline") == 2
+    )
+    assert len({t.key for t in tasks}) == len(tasks)
+    assert {t.episode.mode for t in tasks if t.kind == "recall"} == {"ground_truth"}
+    assert sorted({t.episode.seed for t in tasks if t.kind == "failure"}) == [0, 1]
+    # the same spec gives the same keys; any change to what determines a result changes them
+    assert [t.key for t in expand(spec, MAPS)] == [t.key for t in tasks]
+    other = expand(dataclasses.replace(spec, seed=7), MAPS)
+    assert not {t.key for t in other} & {t.key for t in tasks}
+    latency = _spec(methods=["sift-vlad"], episode={"latency": {"mode": "none"}})
+    base = _spec(methods=["sift-vlad"])
+    assert not {t.key for t in expand(latency, MAPS)} & {t.key for t in expand(base, MAPS)}
+    # traffic changes what the baseline drives through: then setups need their own baselines
+    traffic = _spec(sweep={"traffic.cars": [0, 5]}, recall=False, failure=False)
+    assert len(expand(traffic, {})) == 4
+
+
+def test_bad_experiments_are_clear_errors(tmp_path):
+    with pytest.raises(UnknownNameError, match="valid: town01, town10"):
+        _spec(towns=["town99"])
+    with pytest.raises(UnknownNameError, match=r"valid: aliked-lightglue, .*sift-vlad"):
+        _spec(methods=["surf"])
+    with pytest.raises(UnknownNameError, match=r"sweep key 'illumnation\.k'; valid: camera"):
+        _spec(sweep={"illumnation.k": [1]})
+    with pytest.raises(UnknownNameError, match="valid: k, sun_azimuth_deg"):
+        _spec(sweep={"illumination.kk": [1]})
+    with pytest.raises(
+        ConfigError, match=r"sweep\.illumination\.k: an empty list expands to zero runs"
+    ):
+        _spec(sweep={"illumination.k": []})
+    with pytest.raises(ConfigError, match=r"sweep\.illumination\.k: must be >= 0"):
+        _spec(sweep={"illumination.k": [0, -2]})
+    with pytest.raises(UnknownNameError, match="season"):
+        _spec(sweep={"season": ["summer", "monsoon"]})
+    with pytest.raises(ConfigError, match="repetitions: must be >= 1"):
+        _spec(repetitions=0)
+    with pytest.raises(ConfigError, match="methods: recall and failure episodes need"):
+        _spec(methods=[])
+    with pytest.raises(UnknownNameError, match="'sed'; valid: baseline, cache"):
+        _spec(sed=1)
+    with pytest.raises(ConfigError, match="give all of features, matcher and retrieval"):
+        _spec(methods=[{"name": "mine", "features": "sift"}])
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("towns: [town10\n")
+    with pytest.raises(ConfigError, match="invalid YAML"):
+        load_experiment(bad)
+
+
+def test_shipped_experiments_load():
+    from pathlib import Path
+
+    files = sorted(Path(__file__).parents[2].joinpath("experiments").glob("*.yaml"))
+    names = {f.stem for f in files}
+    assert {"smoke", "demo", "illumination", "viewpoint", "weather", "season", "intrinsics",
+            "extrinsics", "multi_camera", "traffic", "headlights"} <= names  # fmt: skip
+    for f in files:
+        spec = load_experiment(f)
+        assert spec.name == f.stem and setups(spec)

@@ -1,0 +1,157 @@
+import os
+import sqlite3
+
+import pytest
+import yaml
+
+from tests.bench.fakes import CONTROL_ENV, run_fake
+from tests.conftest import small_spec
+from vlocbench.bench.experiment import expand, load_experiment
+from vlocbench.bench.runner import execute, run_experiment
+from vlocbench.bench.store import DB_FILE, ResultStore
+from vlocbench.config import to_dict
+
+
+def _fake_tasks():
+    spec = load_experiment({"name": "fake", "towns": ["town10"], "methods": ["sift-vlad"],
+                            "sweep": {"illumination.k": [0, 6]}, "repetitions": 2})  # fmt: skip
+    return expand(spec, {("town10", "sift-vlad"): "/nowhere/g/m"})  # 2 x (1 + 2) + 2 = 8
+
+
+@pytest.fixture
+def control(tmp_path, monkeypatch):
+    folder = tmp_path / "control"
+    folder.mkdir()
+    monkeypatch.setenv(CONTROL_ENV, str(folder))
+    return folder
+
+
+def test_local_pool_retries_the_episode_of_a_dead_worker(tmp_path, control):
+    tasks = _fake_tasks()
+    (control / "die-illumination.k=6-sift-vlad-1").touch()  # one failure episode's worker dies once
+    (control / "always-die-illumination.k=0-sift-vlad-0").touch()  # these die on every attempt
+    with ResultStore(tmp_path / "out", "fake") as store:
+        finished, errors, retried, _ = execute(
+            tasks, store, workers=2, runner=run_fake, progress=False
+        )
+        rows = {(r.setup, r.kind, r.repetition): r for r in store.rows(None) or []}
+        done = store.done_keys()
+    # the two always-dying tasks (recall and failure rep 0 at k = 0) end as errors after 3 attempts
+    assert errors == 2 and finished == len(tasks) - 2
+    assert retried >= 1 + 2 * 2
+    assert len(done) == len(tasks) - 2
+    with sqlite3.connect(tmp_path / "out" / DB_FILE) as db:
+        got = dict(db.execute("SELECT status, COUNT(*) FROM episodes GROUP BY status").fetchall())
+        died = db.execute("SELECT error, attempts FROM episodes WHERE status='error'").fetchall()
+    assert got == {"ok": len(tasks) - 2, "error": 2}
+    assert died == [("its worker process died", 3)] * 2
+    assert rows == {}  # no run was started: rows() lists a run's episodes only
+
+
+def test_dask_cluster_on_loopback(tmp_path, control):
+    distributed = pytest.importorskip("distributed")
+    tasks = _fake_tasks()
+    (control / "die-illumination.k=6-sift-vlad-1").touch()
+    cluster = distributed.LocalCluster(
+        n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
+        dashboard_address=None, local_directory=str(tmp_path / "dask"),
+    )  # fmt: skip
+    with cluster, ResultStore(tmp_path / "out", "fake") as store:
+        finished, errors, _, _ = execute(
+            tasks, store, scheduler=cluster.scheduler_address, runner=run_fake, progress=False
+        )
+        assert store.done_keys() == {t.key for t in tasks}
+    assert (finished, errors) == (len(tasks), 0)
+    assert not (control / "die-illumination.k=6-sift-vlad-1").exists()  # it did die, once
+
+
+def test_an_unreachable_scheduler_is_a_clear_error(tmp_path, monkeypatch):
+    pytest.importorskip("distributed")
+    from vlocbench.bench import runner
+    from vlocbench.errors import ConfigError
+
+    monkeypatch.setattr(runner, "CONNECT_TIMEOUT_S", 1)
+    with ResultStore(tmp_path, "fake") as store, pytest.raises(ConfigError, match="cannot reach"):
+        execute(
+            _fake_tasks(), store, scheduler="tcp://127.0.0.1:9", runner=run_fake, progress=False
+        )
+
+
+# -- a real experiment end to end: gallery, map, episodes, store, resume, report ------------------
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory):
+    root = tmp_path_factory.mktemp("tiny")
+    (root / "small.yaml").write_text(yaml.safe_dump(to_dict(small_spec())))
+    spec = {
+        "name": "tiny",
+        "towns": [str(root / "small.yaml")],
+        "route_length_m": 60,
+        "methods": ["sift-vlad"],
+        "sweep": {"illumination.k": [0, 6]},
+        "repetitions": 1,
+        "gallery": {"camera": {"intrinsics": {"width": 320, "height": 240}}},
+        "output": str(root / "out"),
+        "cache": str(root / "cache"),
+    }
+    (root / "tiny.yaml").write_text(yaml.safe_dump(spec))
+    summary = run_experiment(
+        load_experiment(root / "tiny.yaml"), progress=False, log=lambda s: None
+    )
+    return root, summary
+
+
+def test_experiment_runs_end_to_end_and_resumes(tiny):
+    root, summary = tiny
+    assert (summary.total, summary.finished, summary.errors) == (
+        5,
+        5,
+        0,
+    )  # 2 x (recall + failure) + 1 baseline
+    assert list((root / "cache" / "galleries").iterdir()) and list(
+        (root / "cache" / "maps").iterdir()
+    )
+    with ResultStore(root / "out", "tiny") as store:
+        rows = store.rows()
+    recall = [r for r in rows if r.kind == "recall"]
+    assert len(recall) == 2 and all(r.metrics["queries"] > 10 for r in recall)
+    assert all(r.metrics["recall"][3] > 0.5 for r in recall)  # it localizes on its own map
+    assert {r.config["setup"]["conditions"]["illumination"]["k"] for r in recall} == {0.0, 6.0}
+    again = run_experiment(load_experiment(root / "tiny.yaml"), progress=False, log=lambda s: None)
+    assert (again.skipped, again.finished) == (5, 0)
+
+
+def test_report_of_a_run(tiny):
+    from vlocbench.bench.report import write_report
+
+    root, _ = tiny
+    files = write_report(root / "out", log=lambda s: None)
+    md = files.markdown.read_text()
+    assert "| sift-vlad |" in md and "| odometry only |" in md and "k=6" in md
+    assert r"\begin{tabular}" in files.latex.read_text()
+    assert {p.name for p in files.figures} == {"failure_rate_small.png", "failure_sites_small.png",
+                                               "failure_vs_recall.png", "computation_time.png"}  # fmt: skip
+    page = files.html.read_text()
+    assert page.count("data:image/png;base64,") == 4
+    assert page.count("data:image/jpeg;base64,") == 4  # query and gallery view per setup
+    assert 'src="http' not in page  # self-contained
+
+
+def test_cli_run_and_report_errors(tiny, tmp_path, capsys):
+    from vlocbench.cli import main
+
+    root, _ = tiny
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(yaml.safe_dump({"towns": ["town10"], "methods": ["sift-vlad"],
+                                   "sweep": {"weather.fogg": [10]}}))  # fmt: skip
+    assert main(["run", str(bad)]) == 2
+    assert "valid: fog_visual_range_m, overcast, rain, wetness" in capsys.readouterr().err
+    other = tmp_path / "other.yaml"
+    other.write_text(yaml.safe_dump({"towns": ["town10"], "baseline": True, "recall": False,
+                                     "failure": False, "output": str(root / "out")}))  # fmt: skip
+    assert main(["run", str(other), "--no-progress"]) == 2
+    assert "holds results of experiment 'tiny', not 'other'" in capsys.readouterr().err
+    assert main(["report", str(tmp_path / "empty")]) == 2
+    assert "holds no vlocbench results" in capsys.readouterr().err
+    assert main(["report", str(root / "out"), "--no-examples"]) == 0
+    assert "index.html" in capsys.readouterr().out
+    assert os.path.exists(root / "out" / "report" / "tables.md")

@@ -1,0 +1,120 @@
+import errno
+import os
+import signal
+import sqlite3
+import subprocess
+import sys
+import textwrap
+import time
+
+import pytest
+
+from tests.bench.fakes import synthetic_result
+from vlocbench.bench.store import DB_FILE, EpisodeRow, ResultStore, StoreError
+
+
+def _row(key, status="ok"):
+    return EpisodeRow(key, "failure", "town10", "sift", "k=0", 0, 0, {"a": 1}, status,
+                      None if status == "ok" else "boom", {"failures": 1} if status == "ok" else None,
+                      1.5, 1)  # fmt: skip
+
+
+def test_write_read_and_resume_keys(tmp_path):
+    with ResultStore(tmp_path, "exp") as store:
+        store.start_run("run1", {"name": "exp"}, ["a", "b", "c"])
+        store.write_episode(_row("a"), synthetic_result(2))
+        store.write_episode(_row("b", "error"), None)
+        assert store.done_keys() == {"a"}  # an errored episode runs again
+        rows = store.rows()
+        assert [(r.key, r.status) for r in rows] == [("a", "ok"), ("b", "error")]
+        traj = store.read_table("a", "trajectory")
+        assert traj["true_x_m"].shape == (50,) and traj["ekf_x_m"][0] == pytest.approx(0.1)
+        locs = store.read_table("a", "localizations")
+        assert list(locs["success"]) == [True] * 4
+    # a second run of the same experiment: new run, old episodes found by key
+    with ResultStore(tmp_path, "exp") as store:
+        store.start_run("run2", {"name": "exp"}, ["a", "d"])
+        assert store.done_keys() == {"a"}
+        assert [r.key for r in store.rows()] == ["a"]
+        assert [r.key for r in store.rows("run1")] == ["a", "b"]
+
+
+def test_another_experiments_folder_and_a_busy_folder_are_refused(tmp_path):
+    with (
+        ResultStore(tmp_path, "exp"),
+        pytest.raises(StoreError, match="in use by another vlocbench run"),
+    ):
+        ResultStore(tmp_path, "exp").__enter__()
+    with pytest.raises(StoreError, match="holds results of experiment 'exp', not 'other'"):
+        ResultStore(tmp_path, "other").__enter__()
+    (tmp_path / "junk").mkdir()
+    (tmp_path / "junk" / DB_FILE).write_text("not a database" * 100)
+    with pytest.raises(StoreError, match="not a vlocbench store"):
+        ResultStore(tmp_path / "junk", "exp").__enter__()
+
+
+def test_a_full_disk_leaves_the_store_as_it_was(tmp_path, monkeypatch):
+    import pyarrow.parquet as pq
+
+    with ResultStore(tmp_path, "exp") as store:
+        store.write_episode(_row("a"), synthetic_result(1))
+        real = pq.write_table
+        calls = []
+
+        def full(table, where, **kw):
+            calls.append(where)
+            if len(calls) == 2:  # the second table of the episode
+                raise OSError(errno.ENOSPC, "No space left on device")
+            return real(table, where, **kw)
+
+        monkeypatch.setattr(pq, "write_table", full)
+        with pytest.raises(StoreError, match=r"episode b .*\(disk full\).*rerun to resume"):
+            store.write_episode(_row("b"), synthetic_result(1))
+        assert store.done_keys() == {"a"}
+        assert sorted(p.name for p in (tmp_path / "episodes").iterdir()) == ["a"]
+    with sqlite3.connect(tmp_path / DB_FILE) as db:
+        assert db.execute("PRAGMA integrity_check").fetchone() == ("ok",)
+
+
+def test_kill_9_loses_only_the_episode_in_flight(tmp_path):
+    """A driver killed with SIGKILL mid-write: the store stays readable; a rerun finishes the
+    rest without duplicates."""
+    script = textwrap.dedent(f"""
+        import time
+        from tests.bench.fakes import synthetic_result
+        from tests.bench.test_store import _row
+        from vlocbench.bench.store import ResultStore
+        with ResultStore({str(tmp_path)!r}, "exp") as store:
+            store.start_run("r", {{}}, [f"k{{i}}" for i in range(100)])
+            for i in range(100):
+                if f"k{{i}}" not in store.done_keys():
+                    store.write_episode(_row(f"k{{i}}"), synthetic_result(1))
+                    print(i, flush=True)
+                time.sleep(0.02)
+    """)
+    env = {**os.environ, "PYTHONPATH": os.getcwd()}
+    proc = subprocess.Popen(
+        [sys.executable, "-c", script], stdout=subprocess.PIPE, text=True, env=env
+    )
+    for _ in range(10):  # let it store ten episodes, then kill it in the middle of the loop
+        proc.stdout.readline()
+    time.sleep(0.05)
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    with ResultStore(tmp_path, "exp") as store:
+        done = store.done_keys()
+        assert 10 <= len(done) < 100
+        for key in done:  # every committed episode has its tables
+            assert store.read_table(key, "trajectory")["time_s"].shape == (50,)
+    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, env=env)
+    assert proc.returncode == 0, proc.stderr
+    assert len(proc.stdout.split()) == 100 - len(done)  # only the missing ones ran
+    with sqlite3.connect(tmp_path / DB_FILE) as db:
+        assert db.execute("SELECT COUNT(*), COUNT(DISTINCT key) FROM episodes").fetchone() == (
+            100,
+            100,
+        )
+        assert db.execute("PRAGMA integrity_check").fetchone() == ("ok",)
+    assert sorted(p.name for p in (tmp_path / "episodes").iterdir()) == sorted(
+        f"k{i}" for i in range(100)
+    )
