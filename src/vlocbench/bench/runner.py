@@ -60,6 +60,7 @@ class RunSummary:
     wall_s: float  # the whole run, galleries and maps included
     episodes_wall_s: float  # the episode phase
     episode_s: float  # the sum of the episodes' times in their workers
+    store_s: float  # the driver's time writing results (metrics, Parquet, SQLite)
     workers: int
 
     @property
@@ -68,6 +69,11 @@ class RunSummary:
         (storing, scheduling, transfers, idle workers at the end)."""
         busy = self.episode_s / self.workers
         return 0.0 if busy <= 0 else max(0.0, self.episodes_wall_s / busy - 1)
+
+    @property
+    def store_overhead(self) -> float:
+        """The driver's writing time as a fraction of the episodes' time."""
+        return 0.0 if self.episode_s <= 0 else self.store_s / self.episode_s
 
 
 # -- the worker side ------------------------------------------------------------------------------
@@ -130,14 +136,9 @@ def run_task(task: EpisodeTask) -> EpisodeOutcome:
 
 
 def _worker_init() -> None:
-    # one process per core: OpenMP threads spinning against each other make torch crawl
+    # one process per core: OpenMP threads spinning against each other make torch crawl. Set
+    # before torch is imported (by the first localizer), which reads it then.
     os.environ["OMP_NUM_THREADS"] = "1"
-    try:
-        import torch
-
-        torch.set_num_threads(1)
-    except ImportError:
-        pass
 
 
 # -- the driver side ------------------------------------------------------------------------------
@@ -229,8 +230,9 @@ def execute(
     runner: Callable[[EpisodeTask], EpisodeOutcome] = run_task,
     max_attempts: int = 3,
     progress: bool = True,
-) -> tuple[int, int, int, float]:
-    """Run ``tasks`` and write each outcome as it arrives: (finished, errors, retried, episode s).
+) -> tuple[int, int, int, float, float]:
+    """Run ``tasks``, writing each outcome as it arrives: (finished, errors, retried, seconds in
+    episodes, seconds writing).
 
     ``workers == 1`` without a scheduler runs in this process. Otherwise at most one episode per
     worker is in flight, so a worker that dies takes only the episodes in flight with it: they are
@@ -240,13 +242,15 @@ def execute(
         raise ConfigError("workers", "must be >= 1")
     bar = _Progress(len(tasks), progress)
     finished = errors = retried = 0
-    episode_s = 0.0
+    episode_s = store_s = 0.0
 
     def record(task: EpisodeTask, outcome: EpisodeOutcome | None, error: str | None,
                attempts: int) -> None:  # fmt: skip
-        nonlocal finished, errors, episode_s
+        nonlocal finished, errors, episode_s, store_s
+        t = time.perf_counter()
         store.write_episode(_row(task, outcome, error, attempts),
                             outcome.result if outcome else None)  # fmt: skip
+        store_s += time.perf_counter() - t
         if outcome:
             finished += 1
             episode_s += outcome.wall_s
@@ -258,15 +262,19 @@ def execute(
         if scheduler is None and workers == 1:
             for task in tasks:
                 try:
-                    record(task, runner(task), None, 1)
+                    outcome = runner(task)
                 except Exception:  # an episode's bug must not end the run: record it
                     record(task, None, traceback.format_exc(limit=8), 1)
-            return finished, errors, retried, episode_s
+                    continue
+                record(task, outcome, None, 1)
+            return finished, errors, retried, episode_s, store_s
         attempts = dict.fromkeys((t.key for t in tasks), 0)
         pending = deque(tasks)
         while pending:
             executor, client, window = _executor(workers, scheduler)
             running: dict[cf.Future, EpisodeTask] = {}
+            lost: list[EpisodeTask] = []
+            interrupted = True  # until the loop ends normally (Ctrl-C, a store error)
             try:
                 while pending or running:
                     while pending and len(running) < window:
@@ -274,15 +282,17 @@ def execute(
                         attempts[task.key] += 1
                         running[executor.submit(runner, task)] = task
                     done, _ = cf.wait(running, return_when=cf.FIRST_COMPLETED)
-                    lost = []
                     for future in done:
                         task = running.pop(future)
                         try:
-                            record(task, future.result(), None, attempts[task.key])
+                            outcome = future.result()
                         except cf.process.BrokenProcessPool:
                             lost.append(task)
+                            continue
                         except Exception as exc:
                             record(task, None, _describe(exc), attempts[task.key])
+                            continue
+                        record(task, outcome, None, attempts[task.key])
                     if lost:  # the pool is broken: everything in flight died with it
                         lost += running.values()
                         running = {}
@@ -293,14 +303,18 @@ def execute(
                             else:
                                 record(task, None, "its worker process died", attempts[task.key])
                         break
+                interrupted = False
             finally:
                 if client is None:
+                    if lost or interrupted:  # don't wait for workers that are dead or not needed
+                        for process in list(getattr(executor, "_processes", {}).values()):
+                            process.kill()
                     executor.shutdown(wait=True, cancel_futures=True)
                 else:
                     for future in running:
                         future.cancel()
                     client.close()
-        return finished, errors, retried, episode_s
+        return finished, errors, retried, episode_s, store_s
     finally:
         bar.close()
 
@@ -350,16 +364,17 @@ def run_experiment(
             f"{len(tasks) - len(todo)} already done, {len(todo)} to run"
         )
         t1 = time.perf_counter()
-        finished, errors, retried, episode_s = execute(
+        finished, errors, retried, episode_s, store_s = execute(
             _order(todo), store, workers, scheduler, runner, progress=progress
         )
         return RunSummary(
             spec.output_dir, len(tasks), len(tasks) - len(todo), finished, errors, retried,
-            time.perf_counter() - t0, time.perf_counter() - t1, episode_s, workers,
+            time.perf_counter() - t0, time.perf_counter() - t1, episode_s, store_s, workers,
         )  # fmt: skip
 
 
 def _order(tasks: Iterable[EpisodeTask]) -> list[EpisodeTask]:
-    """Longest first (failure episodes), grouped by town and map so workers reuse what they load."""
+    """Longest first (visual failure episodes, then recall, then odometry only), by town and map
+    within each kind so that consecutive episodes reuse the worker's scene and localizer."""
     rank = {"failure": 0, "recall": 1, "baseline": 2}
-    return sorted(tasks, key=lambda t: (t.town, t.map_dir or "", rank[t.kind], t.key))
+    return sorted(tasks, key=lambda t: (rank[t.kind], t.town, t.map_dir or "", t.key))

@@ -1,0 +1,68 @@
+"""Throughput of the benchmark runner: episodes per hour with 1 and 2 workers, and the harness's
+overhead (store, scheduling, transfers, idle workers at the end) as a share of episode time.
+
+    python benchmarks/bench_runner.py [--workers 1,2] [--repeats 3] [--out out/bench_runner]
+
+The experiment is fixed: the first 150 m of town10's route, SIFT + VLAD at 800x600, k in
+{0, 3, 6, 9}, one repetition (4 recall, 4 failure and 1 odometry-only episodes). Its gallery and
+map are built once (a warm-up run) and reused; each timed run starts from an empty store. Target
+(issue 5): overhead under 5 %.
+"""
+
+from __future__ import annotations
+
+import argparse
+import shutil
+import statistics
+from pathlib import Path
+
+from vlocbench.bench.experiment import load_experiment
+from vlocbench.bench.runner import run_experiment
+
+EXPERIMENT = {
+    "name": "bench_runner",
+    "towns": ["town10"],
+    "route_length_m": 150,
+    "methods": ["sift-vlad"],
+    "sweep": {"illumination.k": [0, 3, 6, 9]},
+    "repetitions": 1,
+}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--workers", default="1,2")
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--out", type=Path, default=Path("out/bench_runner"))
+    args = ap.parse_args()
+    spec = load_experiment(
+        {**EXPERIMENT, "output": str(args.out / "warmup"), "cache": str(args.out / "cache")}
+    )
+    shutil.rmtree(spec.output_dir, ignore_errors=True)
+    run_experiment(spec, progress=False, log=lambda s: None)  # gallery, map, imports, caches
+    for workers in (int(w) for w in args.workers.split(",")):
+        rates, overheads, stores = [], [], []
+        for k in range(args.repeats):
+            out = args.out / f"w{workers}-{k}"
+            shutil.rmtree(out, ignore_errors=True)
+            s = run_experiment(
+                load_experiment({**EXPERIMENT, "output": str(out), "cache": str(args.out / "cache")}),
+                workers=workers,
+                progress=False,
+                log=lambda s: None,
+            )
+            rates.append(s.finished / s.episodes_wall_s * 3600)
+            overheads.append(100 * s.harness_overhead)
+            stores.append(100 * s.store_overhead)
+        print(
+            f"{workers} worker(s): {statistics.median(rates):.0f} episodes/hour "
+            f"({s.finished} episodes of about {s.episode_s / s.finished:.1f} s in the worker); "
+            f"harness overhead {statistics.median(overheads):.1f} % of episode time "
+            f"(writing results {statistics.median(stores):.2f} %; the rest is scheduling, "
+            f"transfers and workers idle at the end; median of {args.repeats}, runs: "
+            + ", ".join(f"{v:.1f}" for v in overheads) + ")"
+        )
+
+
+if __name__ == "__main__":
+    main()
