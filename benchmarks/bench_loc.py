@@ -2,7 +2,7 @@
 
     python benchmarks/bench_loc.py [--town town01] [--methods sift,orb-teblid,aliked-lightglue]
                                    [--k 0,6] [--every 1] [--speed-k 5] [--out out/bench_loc]
-                                   [--confident-inliers 0]
+                                   [--confident-inliers 0] [--route-length 0]
 
 Galleries and maps are built once under --out and reused. Recall: the town's route driven on ground
 truth with queries at 2 Hz (every --every-th query kept), at each illumination level k; a failed
@@ -28,7 +28,9 @@ from vlocbench.loc.gallery import GALLERY_FILE, Gallery
 from vlocbench.loc.localizer import LocalizerConfig, MapLocalizer
 from vlocbench.loc.mapping import MAP_FILE, MappingConfig, build_map
 from vlocbench.loc.registry import method_conf
+from vlocbench.nav import WaypointPath
 from vlocbench.sim import Conditions, Illumination, Simulator, gallery_camera
+from vlocbench.sim.scene import SCENE_VERSION
 from vlocbench.sim.town import generate_town, load_town_spec
 
 THRESHOLDS = ((0.25, 2.0), (0.5, 5.0), (5.0, 10.0), (20.0, 180.0))
@@ -60,14 +62,21 @@ def main() -> None:
     ap.add_argument("--speed-queries", type=int, default=20)
     ap.add_argument("--num-pairs", type=int, default=25)
     ap.add_argument("--out", type=Path, default=Path("out/bench_loc"))
+    ap.add_argument("--route-length", type=float, default=0.0, help="metres of route, 0: all")
     ap.add_argument(
         "--confident-inliers", type=int, default=0, help="LocalizerConfig.confident_inliers"
     )
     args = ap.parse_args()
     town = generate_town(load_town_spec(args.town))
     path = plan_town_route(town)
+    if args.route_length:  # the first metres only (a quicker gallery, map and recall drive)
+        path = WaypointPath(path.xy[: int(np.searchsorted(path.s_m, args.route_length)) + 1])
     cam = gallery_camera()
-    gallery_dir = args.out / f"{town.name}-gallery"
+    # a new look of the town, a new gallery
+    stem = f"{town.name}-v{SCENE_VERSION}" + (
+        f"-{args.route_length:g}m" if args.route_length else ""
+    )
+    gallery_dir = args.out / f"{stem}-gallery"
     if not (gallery_dir / GALLERY_FILE).exists():
         sim = Simulator(town)
         t = time.perf_counter()
@@ -77,7 +86,7 @@ def main() -> None:
     gallery = Gallery.load(gallery_dir)
     print(f"{town.name}: gallery of {len(gallery)} images, route {path.length_m:.0f} m")
     for method in args.methods.split(","):
-        map_dir = args.out / f"{town.name}-{method}-p{args.num_pairs}"
+        map_dir = args.out / f"{stem}-{method}-p{args.num_pairs}"
         fresh = not (map_dir / MAP_FILE).exists()
         report = build_map(
             gallery, method_conf(method), map_dir, MappingConfig(num_pairs=args.num_pairs)

@@ -46,7 +46,9 @@ def main() -> None:
             out = args.out / f"w{workers}-{k}"
             shutil.rmtree(out, ignore_errors=True)
             s = run_experiment(
-                load_experiment({**EXPERIMENT, "output": str(out), "cache": str(args.out / "cache")}),
+                load_experiment(
+                    {**EXPERIMENT, "output": str(out), "cache": str(args.out / "cache")}
+                ),
                 workers=workers,
                 progress=False,
                 log=lambda s: None,
@@ -60,7 +62,8 @@ def main() -> None:
             f"harness overhead {statistics.median(overheads):.1f} % of episode time "
             f"(writing results {statistics.median(stores):.2f} %; the rest is scheduling, "
             f"transfers and workers idle at the end; median of {args.repeats}, runs: "
-            + ", ".join(f"{v:.1f}" for v in overheads) + ")"
+            + ", ".join(f"{v:.1f}" for v in overheads)
+            + ")"
         )
 
 

@@ -27,10 +27,9 @@ Array = NDArray[np.float64]
 GROUP_STATIC, GROUP_FOLIAGE_FULL, GROUP_FOLIAGE_SPARSE = 0, 1, 2
 GROUP_TRAFFIC, GROUP_COLLISION, GROUP_EGO = 3, 4, 5
 # bump when the look of the towns changes: galleries and maps (and results) are keyed by it
-SCENE_VERSION = 2
+SCENE_VERSION = 3
 GROUND_FLOOR_M = 4.2
 SHOP_ATLAS_COLUMNS = 8
-SHOP_STRIDE = 7  # atlas step from one shop to the next along a building (coprime to most counts)
 SKY_SIZE = 64
 CAR_HALF_M = (2.3, 0.95)  # half length, half width of every car (ego, traffic, parked)
 CAR_COLORS = (
@@ -313,18 +312,21 @@ class _SceneBuilder:
         for rect in self.town.grass:
             self.flat("grass", rect, h + 0.01, 4.0)
 
-    def shopfronts(self, origin: Array, u: Array, length_m: float, first: int) -> None:
-        """A row of shops along a ground floor: atlas tiles ``first``, ``first + stride``, ...
-
-        Neighbouring shops differ and so does the sequence from one building to the next, so
-        that no stretch of street repeats another (a tile alone may recur across town).
-        """
+    def shopfronts(
+        self, origin: Array, u: Array, length_m: float, first: int, rng: np.random.Generator
+    ) -> None:
+        """A row of shops along a ground floor: atlas tile ``first``, then a random sequence in
+        which neighbours differ, drawn per building, so that no stretch of street repeats
+        another (a tile alone recurs across town)."""
         count = self.town.spec.buildings.shop_styles
         n = max(1, round(length_m / tex.SHOP_WIDTH_M))
         seg = length_m / n
         cols, rows = self.shop_columns, self.shop_rows
+        shop = first
         for j in range(n):
-            r, c = divmod((first + j * SHOP_STRIDE) % count, cols)
+            if j and count > 1:
+                shop = (shop + 1 + int(rng.integers(0, count - 1))) % count
+            r, c = divmod(shop, cols)
             self.meshes["shops"].quad(
                 origin + u * (j * seg), u, np.array([0.0, 0, 1]), seg, GROUND_FLOOR_M,
                 (c / cols, (r + 1) / rows), (1 / (cols * seg), -1 / (rows * GROUND_FLOOR_M)),
@@ -371,14 +373,15 @@ class _SceneBuilder:
             facade = f"tower{b.facade % 3}" if b.tower else f"facade{b.facade}"
             mat = facade if b.tower else f"{facade}_{b.tint}"
             tile = self.tiles[facade]
-            cells = np.random.default_rng((self.town.spec.seed, k))  # this building's own cells
+            # this building's own sequence of window cells and shops
+            cells = np.random.default_rng((self.town.spec.seed, k))
             for s in range(4):
                 a, c = corners[s], corners[(s + 1) % 4]
                 length = float(np.linalg.norm(c - a))
                 u = (c - a) / length
                 z0 = 0.0
                 if b.shop >= 0 and sides[s] == b.front:
-                    self.shopfronts(a, u, length, b.shop)
+                    self.shopfronts(a, u, length, b.shop, cells)
                     z0 = GROUND_FLOOR_M
                 self.facade_wall(mat, tile, a, u, length, (z0, b.height_m), cells)
             self.meshes["roof"].quad(
