@@ -124,6 +124,30 @@ def recall_table(summary: Summary, town: str, fused: bool = False) -> Table:
     return header, rows
 
 
+def fragmentation_table(summary: Summary, town: str) -> Table:
+    """Where the failures happen: over the repetitions of each method and setup, how many, at how
+    many distinct 25 m stretches of the route, the worst stretch, and the tracking error."""
+    header = ["method", "setup", "failures", "places", "worst stretch (share)", "tracking (m)"]
+    rows = []
+    for method in summary.methods:
+        seen = set()
+        for s in summary.setups:
+            c = summary.cell(town, method, s.label)
+            if c is None or c.fragmentation is None or c.keys in seen:
+                continue
+            seen.add(c.keys)  # a shared baseline once
+            f = c.fragmentation
+            worst = f"{f.worst_s_m:.0f} m ({100 * f.top_share:.0f} %)" if f.failures else "–"
+            shared = method == BASELINE and all(
+                (x := summary.cell(town, method, o.label)) is None or x.keys == c.keys
+                for o in summary.setups
+            )
+            label = "all" if shared else _short(summary, s.label)
+            rows.append(["odometry only" if method == BASELINE else method, label,
+                         str(f.failures), str(f.places), worst, _fmt(c.tracking_error_m, 2)])  # fmt: skip
+    return header, rows
+
+
 def _markdown(table: Table) -> str:
     header, rows = table
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
@@ -161,6 +185,8 @@ def _tables(summary: Summary) -> list[tuple[str, Table]]:
                         "ground-truth drive, raw localization", recall_table(summary, town)))  # fmt: skip
             out.append((f"{name}: recall (%) of the fused (EKF) pose at every step, same drive",
                         recall_table(summary, town, fused=True)))  # fmt: skip
+        out.append((f"{name}: where failures happen (25 m stretches of the route) and the "
+                    "mean tracking error", fragmentation_table(summary, town)))  # fmt: skip
     return out
 
 
