@@ -71,3 +71,16 @@ def test_maps_are_keyed_by_gallery_method_and_configuration(gallery, tmp_path):
     assert a.parent.name == gallery.identity
     assert a != default_map_dir(tmp_path, gallery, "orb-teblid", orb, MappingConfig())
     assert a != default_map_dir(tmp_path, gallery, "sift", sift, MappingConfig(num_pairs=10))
+
+
+def test_a_map_build_killed_mid_write_is_finished_by_a_rerun(gallery, tmp_path):
+    from vlocbench.loc.mapping import build_map
+    from vlocbench.loc.registry import method_conf
+
+    out = tmp_path / "map"
+    first = build_map(gallery, method_conf("sift-vlad"), out)
+    for cache in ("features.h5", "matches.h5", "global.h5"):  # what a kill -9 mid-write leaves
+        if (out / cache).exists():
+            (out / cache).write_bytes(b"\x89HDF\r\n\x1a\n" + b"\0" * 64)
+    again = build_map(gallery, method_conf("sift-vlad"), out)
+    assert again.points == first.points and again.images == first.images

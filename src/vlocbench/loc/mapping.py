@@ -68,6 +68,16 @@ def default_map_dir(root: str | Path, gallery: Gallery, method: str, conf: Metho
 
 
 # -- HDF5 caches ---------------------------------------------------------------------------------
+def _writable_cache(path: Path) -> h5py.File:
+    """A cache file to add to. One that a killed build left unreadable starts over: it is only a
+    cache, and a rerun must finish what the kill interrupted."""
+    try:
+        return h5py.File(path, "a")
+    except OSError:
+        path.unlink(missing_ok=True)
+        return h5py.File(path, "a")
+
+
 class FeatureStore:
     """Features per image name in an HDF5 file."""
 
@@ -89,7 +99,7 @@ class FeatureStore:
             return set(f.keys())
 
     def write(self, items: Iterator[tuple[str, Features]]) -> None:
-        with self._open("a") as f:
+        with _writable_cache(self.path) as f:
             for name, feats in items:
                 if name in f:
                     del f[name]
@@ -154,7 +164,11 @@ def cam_from_world_rigid(world_from_cam: np.ndarray) -> pycolmap.Rigid3d:
 # -- the pipeline --------------------------------------------------------------------------------
 def _extract(gallery: Gallery, conf: MethodConf, store: FeatureStore, overwrite: bool,
              progress: Progress | None) -> None:  # fmt: skip
-    done = set() if overwrite else store.names()
+    try:
+        done = set() if overwrite else store.names()
+    except LocalizationError:  # left unreadable by a killed build: extract again
+        store.path.unlink()
+        done = set()
     todo = [n for n in gallery.names if n not in done]
     if not todo:
         return
@@ -184,7 +198,7 @@ def _global(gallery: Gallery, conf: MethodConf, out: Path, features: FeatureStor
     else:
         with np.load(state_path) as state:
             descriptor.load_state(dict(state))
-    with h5py.File(store_path, "a") as f, features.reading() as read:
+    with _writable_cache(store_path) as f, features.reading() as read:
         for name in gallery.names:
             if name not in f:
                 f[name] = descriptor.describe(gallery.load_image(name), read(name))
@@ -210,7 +224,7 @@ def _match(gallery: Gallery, conf: MethodConf, mapping: MappingConfig, features:
            pairs: list[tuple[str, str]], path: Path, progress: Progress | None) -> dict[tuple[str, str], np.ndarray]:  # fmt: skip
     matcher = None
     out: dict[tuple[str, str], np.ndarray] = {}
-    with h5py.File(path, "a") as f, features.reading() as read:
+    with _writable_cache(path) as f, features.reading() as read:
         for k, (a, b) in enumerate(pairs):
             key = _pair_key(a, b)
             if key not in f:
