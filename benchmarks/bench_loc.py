@@ -23,17 +23,15 @@ import numpy as np
 
 from vlocbench.bench import EpisodeConfig, plan_town_route, run_episode
 from vlocbench.bench.gallery_capture import capture_gallery
+from vlocbench.bench.metrics import recall
 from vlocbench.bench.visual import VisualLocalizer, camera_model
 from vlocbench.loc.gallery import GALLERY_FILE, Gallery
 from vlocbench.loc.localizer import LocalizerConfig, MapLocalizer
 from vlocbench.loc.mapping import MAP_FILE, MappingConfig, build_map
 from vlocbench.loc.registry import method_conf
-from vlocbench.nav import WaypointPath
 from vlocbench.sim import Conditions, Illumination, Simulator, gallery_camera
 from vlocbench.sim.scene import SCENE_VERSION
 from vlocbench.sim.town import generate_town, load_town_spec
-
-THRESHOLDS = ((0.25, 2.0), (0.5, 5.0), (5.0, 10.0), (20.0, 180.0))
 
 
 class EveryNth(VisualLocalizer):
@@ -68,9 +66,8 @@ def main() -> None:
     )
     args = ap.parse_args()
     town = generate_town(load_town_spec(args.town))
-    path = plan_town_route(town)
-    if args.route_length:  # the first metres only (a quicker gallery, map and recall drive)
-        path = WaypointPath(path.xy[: int(np.searchsorted(path.s_m, args.route_length)) + 1])
+    # --route-length: the first metres only (a quicker gallery, map and recall drive)
+    path = plan_town_route(town).head(args.route_length)
     cam = gallery_camera()
     # a new look of the town, a new gallery
     stem = f"{town.name}-v{SCENE_VERSION}" + (
@@ -126,12 +123,13 @@ def main() -> None:
             r = run_episode(sim, path, loc, EpisodeConfig(mode="ground_truth"))
             sim.close()
             recs = [x for x in r.localizations if x.reason != "skipped"]
-            pos = np.nan_to_num(np.array([x.position_error_m for x in recs]), nan=np.inf)
-            yaw = np.nan_to_num(np.array([x.yaw_error_deg for x in recs]), nan=np.inf)
-            recall = [100 * np.mean((pos < m) & (yaw < d)) for m, d in THRESHOLDS]
+            fractions = recall(
+                np.array([x.position_error_m for x in recs]),
+                np.array([x.yaw_error_deg for x in recs]),
+            )
             print(
                 f"  recall k={k:g} ({len(recs)} queries): "
-                + " / ".join(f"{v:.1f}" for v in recall)
+                + " / ".join(f"{100 * v:.1f}" for v in fractions)
                 + " % at (0.25 m, 2 deg) / (0.5 m, 5 deg) / (5 m, 10 deg) / (20 m, 180 deg)"
             )
 

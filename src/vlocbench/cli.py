@@ -161,9 +161,8 @@ def _run(args: argparse.Namespace) -> int:
     import dataclasses
 
     from vlocbench.bench.experiment import load_experiment
-    from vlocbench.bench.report import read_run, summary_lines, write_report
+    from vlocbench.bench.report import summary_lines, write_report
     from vlocbench.bench.runner import run_experiment
-    from vlocbench.bench.summary import spec_from_stored, summarize
 
     spec = load_experiment(args.experiment)
     if args.output:
@@ -179,8 +178,7 @@ def _run(args: argparse.Namespace) -> int:
     if args.no_report:
         return 1 if summary.errors else 0
     files = write_report(spec.output_dir, examples=not args.no_examples)
-    stored, rows = read_run(spec.output_dir)
-    print("\n".join(summary_lines(summarize(spec_from_stored(stored), rows))))
+    print("\n".join(summary_lines(files.summary)))
     print(f"report: {files.html.resolve()}")
     return 1 if summary.errors else 0
 

@@ -67,4 +67,4 @@ def run_fake(task: EpisodeTask) -> EpisodeOutcome:
     if slow is not None and slow.exists():
         time.sleep(float(slow.read_text() or 1))
     failures = 3 if task.kind == "baseline" else task.repetition % 2
-    return EpisodeOutcome(task.key, synthetic_result(failures), 0.01, os.getpid())
+    return EpisodeOutcome(task.key, synthetic_result(failures), 0.01)

@@ -55,3 +55,10 @@ def test_closest_point_search_is_local():
 def test_bad_config():
     with pytest.raises(ConfigError, match="max_lookahead_s"):
         LocalPlannerConfig(min_lookahead_s=2.0, max_lookahead_s=1.0)
+
+
+def test_head_of_a_path():
+    path = _straight(100.0)
+    head = path.head(31.0)
+    assert head.length_m == 32.0  # up to the first waypoint at or past 31 m
+    assert path.head(0.0) is path and path.head(500.0) is path

@@ -14,8 +14,6 @@ from __future__ import annotations
 
 import base64
 import html
-import json
-import sqlite3
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,7 +25,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from vlocbench.bench.store import DB_FILE, EpisodeRow, StoreError, _episode_row
+from vlocbench.bench.store import read_latest_run
 from vlocbench.bench.summary import BASELINE, Summary, spec_from_stored, summarize
 
 REPORT_DIR = "report"
@@ -41,32 +39,7 @@ class ReportFiles:
     markdown: Path
     latex: Path
     figures: tuple[Path, ...]
-
-
-def read_run(output_dir: str | Path) -> tuple[dict[str, Any], list[EpisodeRow]]:
-    """The latest run's resolved spec and episodes, read-only (a run may be writing meanwhile)."""
-    db_path = Path(output_dir) / DB_FILE
-    if not db_path.is_file():
-        raise StoreError(f"{output_dir} holds no vlocbench results ({DB_FILE} is missing)")
-    try:
-        db = sqlite3.connect(f"file:{db_path}?mode=ro", uri=True)
-        try:
-            last = db.execute(
-                "SELECT run_hash, spec FROM runs ORDER BY started DESC LIMIT 1"
-            ).fetchone()
-            if last is None:
-                raise StoreError(f"{output_dir} has no run yet")
-            cur = db.execute(
-                "SELECT e.* FROM episodes e JOIN run_episodes r ON e.key = r.key "
-                "WHERE r.run_hash = ? ORDER BY e.key",
-                (last[0],),
-            )
-            rows = [_episode_row(*row) for row in cur]
-        finally:
-            db.close()
-    except sqlite3.DatabaseError as exc:
-        raise StoreError(f"{db_path} is not a vlocbench store: {exc}") from None
-    return json.loads(last[1]), rows
+    summary: Summary
 
 
 # -- tables ---------------------------------------------------------------------------------------
@@ -366,7 +339,7 @@ def write_report(
     """Write the tables, figures and the HTML page of the latest run in ``output_dir``."""
     from vlocbench.bench.runner import _town
 
-    stored, rows = read_run(output_dir)
+    stored, rows = read_latest_run(output_dir)
     summary = summarize(spec_from_stored(stored), rows)
     out = Path(output_dir) / REPORT_DIR
     out.mkdir(parents=True, exist_ok=True)
@@ -422,7 +395,7 @@ def write_report(
     page.write_text(f"<!doctype html><html><head><meta charset='utf-8'><title>vlocbench: "
                     f"{html.escape(summary.spec.name)}</title><style>{_CSS}</style></head><body>"
                     + "\n".join(parts) + "</body></html>")  # fmt: skip
-    return ReportFiles(page, md, tex, tuple(figures))
+    return ReportFiles(page, md, tex, tuple(figures), summary)
 
 
 def summary_lines(summary: Summary) -> Sequence[str]:

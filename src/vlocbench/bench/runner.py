@@ -21,8 +21,6 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from vlocbench.bench.episode import plan_town_route, run_episode
 from vlocbench.bench.experiment import EpisodeTask, ExperimentSpec, expand, gallery_key, setups
 from vlocbench.bench.gallery_capture import capture_gallery
@@ -46,7 +44,6 @@ class EpisodeOutcome:
     key: str
     result: EpisodeResult
     wall_s: float  # in the worker, town and map loading included
-    pid: int
 
 
 @dataclass(frozen=True)
@@ -85,11 +82,7 @@ def _town(name: str) -> Town:
 @lru_cache(maxsize=4)
 def _route(name: str, length_m: float = 0.0) -> WaypointPath:
     """The town's route, cut after its first ``length_m`` metres when that is > 0."""
-    path = plan_town_route(_town(name))
-    if length_m <= 0 or length_m >= path.length_m:
-        return path
-    end = int(np.searchsorted(path.s_m, length_m)) + 1
-    return WaypointPath(path.xy[:end])
+    return plan_town_route(_town(name)).head(length_m)
 
 
 _SIM: dict[tuple[str, Any], Simulator] = {}
@@ -132,7 +125,7 @@ def run_task(task: EpisodeTask) -> EpisodeOutcome:
     result = run_episode(
         _simulator(task), _route(task.town, task.route_length_m), localizer, task.episode
     )
-    return EpisodeOutcome(task.key, result, time.perf_counter() - t, os.getpid())
+    return EpisodeOutcome(task.key, result, time.perf_counter() - t)
 
 
 def _worker_init() -> None:

@@ -87,6 +87,41 @@ def _episode_row(*columns: Any) -> EpisodeRow:
     )
 
 
+def _latest_run(db: sqlite3.Connection) -> tuple[str, str] | None:
+    """(run hash, resolved spec JSON) of the most recently started run."""
+    return db.execute("SELECT run_hash, spec FROM runs ORDER BY started DESC LIMIT 1").fetchone()
+
+
+def _run_rows(db: sqlite3.Connection, run_hash: str) -> list[EpisodeRow]:
+    """The episodes a run asked for that have a result, by key."""
+    cur = db.execute(
+        "SELECT e.* FROM episodes e JOIN run_episodes r ON e.key = r.key "
+        "WHERE r.run_hash = ? ORDER BY e.key",
+        (run_hash,),
+    )
+    return [_episode_row(*row) for row in cur]
+
+
+def read_latest_run(output_dir: str | Path) -> tuple[dict[str, Any], list[EpisodeRow]]:
+    """The latest run's resolved spec and episodes, read-only and without the lock (a run may be
+    writing meanwhile)."""
+    db_path = Path(output_dir) / DB_FILE
+    if not db_path.is_file():
+        raise StoreError(f"{output_dir} holds no vlocbench results ({DB_FILE} is missing)")
+    try:
+        db = sqlite3.connect(f"file:{db_path}?mode=ro", uri=True)
+        try:
+            last = _latest_run(db)
+            if last is None:
+                raise StoreError(f"{output_dir} has no run yet")
+            rows = _run_rows(db, last[0])
+        finally:
+            db.close()
+    except sqlite3.DatabaseError as exc:
+        raise StoreError(f"{db_path} is not a vlocbench store: {exc}") from None
+    return json.loads(last[1]), rows
+
+
 def _columns(result: EpisodeResult) -> tuple[dict[str, Any], dict[str, Any]]:
     tr = result.trajectory
     trajectory = {f.name: getattr(tr, f.name) for f in dataclasses.fields(tr)}
@@ -232,22 +267,12 @@ class ResultStore:
 
     def rows(self, run_hash: str | None = None) -> list[EpisodeRow]:
         """Episodes of ``run_hash`` (default: the latest run), finished or failed."""
-        db = self._conn
         if run_hash is None:
-            last = db.execute("SELECT run_hash FROM runs ORDER BY started DESC LIMIT 1").fetchone()
+            last = _latest_run(self._conn)
             if last is None:
                 return []
             run_hash = last[0]
-        cur = db.execute(
-            "SELECT e.* FROM episodes e JOIN run_episodes r ON e.key = r.key "
-            "WHERE r.run_hash = ? ORDER BY e.town, e.method, e.setup, e.kind, e.repetition",
-            (run_hash,),
-        )
-        return [_episode_row(*row) for row in cur]
-
-    def latest_spec(self) -> dict[str, Any] | None:
-        row = self._conn.execute("SELECT spec FROM runs ORDER BY started DESC LIMIT 1").fetchone()
-        return json.loads(row[0]) if row else None
+        return _run_rows(self._conn, run_hash)
 
     def read_table(self, key: str, name: str) -> dict[str, np.ndarray]:
         """One episode's ``trajectory`` or ``localizations`` table as numpy columns."""

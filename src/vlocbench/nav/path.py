@@ -68,6 +68,13 @@ class WaypointPath:
         k = int(np.argmin(dist))
         return Projection(first + k, float(self.s_m[first + k] + t[k]), float(dist[k]))
 
+    def head(self, length_m: float) -> WaypointPath:
+        """The path up to the first waypoint at or past ``length_m`` (all of it when that is <= 0
+        or beyond the end)."""
+        if length_m <= 0 or length_m >= self.length_m:
+            return self
+        return WaypointPath(self.xy[: int(np.searchsorted(self.s_m, length_m)) + 1])
+
     def index_at(self, s_m: float) -> int:
         """The first waypoint at arc length >= ``s_m`` (the last one past the end)."""
         return int(min(np.searchsorted(self.s_m, s_m - 1e-9), len(self.xy) - 1))
