@@ -150,6 +150,8 @@ def test_cli_run_and_report_errors(tiny, tmp_path, capsys):
                                      "failure": False, "output": str(root / "out")}))  # fmt: skip
     assert main(["run", str(other), "--no-progress"]) == 2
     assert "holds results of experiment 'tiny', not 'other'" in capsys.readouterr().err
+    assert main(["run", str(other), "--workers", "0"]) == 2
+    assert "--workers: must be >= 1, got 0" in capsys.readouterr().err
     assert main(["report", str(tmp_path / "empty")]) == 2
     assert "holds no vlocbench results" in capsys.readouterr().err
     assert main(["report", str(root / "out"), "--no-examples"]) == 0

@@ -231,8 +231,7 @@ def execute(
     worker is in flight, so a worker that dies takes only the episodes in flight with it: they are
     run again (up to ``max_attempts`` in all) on a fresh pool; Dask reschedules them itself.
     """
-    if workers < 1:
-        raise ConfigError("workers", "must be >= 1")
+    _check_workers(workers)
     bar = _Progress(len(tasks), progress)
     finished = errors = retried = 0
     episode_s = store_s = 0.0
@@ -312,6 +311,11 @@ def execute(
         bar.close()
 
 
+def _check_workers(workers: int) -> None:
+    if workers < 1:
+        raise ConfigError("--workers", f"must be >= 1, got {workers}")
+
+
 def _describe(exc: BaseException) -> str:
     if type(exc).__name__ == "KilledWorker":  # Dask gave up after its own retries
         return f"its worker died on every attempt ({exc})"
@@ -345,6 +349,7 @@ def run_experiment(
     runner: Callable[[EpisodeTask], EpisodeOutcome] = run_task,
 ) -> RunSummary:
     """Run what the store of ``spec.output_dir`` does not have yet; returns the counts."""
+    _check_workers(workers)  # before hours of gallery and map building, not after
     t0 = time.perf_counter()
     with ResultStore(spec.output_dir, spec.name) as store:
         maps = prepare_maps(spec, log)
