@@ -25,8 +25,9 @@ from vlocbench.bench.runner import EpisodeOutcome
 CONTROL_ENV = "VLOCBENCH_TEST_FAKES"  # folder of marker files that steer the fakes
 
 
-def synthetic_result(failures: int, queries: int = 4) -> EpisodeResult:
-    """A 100 m episode with ``failures`` re-initializations and ``queries`` localizations."""
+def synthetic_result(failures: int, queries: int = 4, lock_losses: int = 0) -> EpisodeResult:
+    """A 100 m episode with ``failures`` re-initializations, ``queries`` localizations and
+    ``lock_losses`` EKF resets."""
     n = 50
     t = np.linspace(0, 25, n)
     zero = np.zeros(n)
@@ -43,6 +44,7 @@ def synthetic_result(failures: int, queries: int = 4) -> EpisodeResult:
         for k in range(queries)
     )
     return EpisodeResult("fake", "navigate", "fake", 100.0, 100.0, True, 25.0, 0.01, reinit,
+                         tuple(2.0 * (k + 1) for k in range(lock_losses)),
                          (Segment(0.0, 100.0),), 0.05, 0.1, locs, trajectory)  # fmt: skip
 
 

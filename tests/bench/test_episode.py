@@ -71,6 +71,23 @@ def test_ground_truth_drive_completes_on_the_route(sim, path):
     assert 3.5 < np.percentile(tr.speed_mps, 75) < 4.3
 
 
+def test_ground_truth_drive_resets_the_ekf_when_it_loses_lock(sim, path):
+    noisy = OdometryNoise(0.04, 0.1, 0.3)
+    config = EpisodeConfig(mode="ground_truth", seed=2, odometry=noisy, lock_lost_m=1.0)
+    r = run_episode(sim, path, None, config)
+    assert r.completed and r.failures == 0  # the car drives on the truth: nothing fails
+    assert len(r.lock_losses_s) >= 1
+    tr = r.trajectory
+    err = tr.ekf_position_error_m
+    for t in r.lock_losses_s:  # above 1 m for 1 s, then back at the truth
+        i = int(np.searchsorted(tr.time_s, t))
+        assert err[i - 1] > 1.0 and (err[i - 20 : i] > 1.0).all() and err[i] < 0.1
+    # never reset, the same drift grows without bound
+    free = run_episode(sim, path, None, dataclasses.replace(config, lock_lost_m=1e6))
+    assert not free.lock_losses_s
+    assert free.trajectory.ekf_position_error_m.max() > 2 * err.max()
+
+
 def test_navigation_on_perfect_localization(sim, path):
     r = run_episode(sim, path, OracleLocalizer(), EpisodeConfig(seed=1))
     assert r.completed and r.failures == 0

@@ -30,9 +30,10 @@ def test_fragmentation_finds_hotspots():
 
 
 def test_episode_metrics():
-    m = episode_metrics(synthetic_result(failures=2, queries=4))
+    m = episode_metrics(synthetic_result(failures=2, queries=4, lock_losses=3))
     assert m.failures == 2 and m.failures_per_km == 20.0
     assert m.failure_sites_s_m == (20.0, 40.0) and m.failure_sites_xy == ((20.0, 0.0), (40.0, 0.0))
     assert m.recall == (1.0, 1.0, 1.0, 1.0)  # 0.1 m and 0.5 deg off
     assert m.recall_ekf == (1.0, 1.0, 1.0, 1.0)
+    assert m.lock_losses_per_km == 30.0
     assert m.queries == 4 and m.ct_mean_s == 0.05

@@ -127,6 +127,7 @@ def test_report_of_a_run(tiny):
     files = write_report(root / "out", log=lambda s: None)
     md = files.markdown.read_text()
     assert "| sift-vlad |" in md and "| odometry only |" in md and "k=6" in md
+    assert "/km) |" in md  # the fused recall with the EKF's lock losses in the ground-truth drive
     assert r"\begin{tabular}" in files.latex.read_text()
     assert {p.name for p in files.figures} == {"failure_rate_small.png", "failure_sites_small.png",
                                                "failure_vs_recall.png", "computation_time.png"}  # fmt: skip

@@ -53,6 +53,9 @@ from vlocbench.nav import (
 )
 from vlocbench.sim import Control, Simulator, Town, VehicleState
 
+# part of every episode key: bump when the same config gives a different result
+EPISODE_VERSION = 2
+
 
 @dataclass(frozen=True)
 class LatencyConfig:
@@ -86,8 +89,14 @@ class EpisodeConfig:
     ekf: EkfConfig = field(default_factory=EkfConfig)
     failure: FailureConfig = field(default_factory=FailureConfig)
     progress: ProgressConfig = field(default_factory=ProgressConfig)
+    # ground_truth drives: the EKF has lost lock once its position error stays above lock_lost_m
+    # for lock_lost_s (a car navigating on it would be about to hit the kerb or parked cars)
+    lock_lost_m: float = 3.0
+    lock_lost_s: float = 1.0
 
     def __post_init__(self) -> None:
+        require(self.lock_lost_m > 0, "lock_lost_m", "must be > 0")
+        require(self.lock_lost_s >= 0, "lock_lost_s", "must be >= 0")
         require(
             0 < self.localization_rate_hz <= 20,
             "localization_rate_hz",
@@ -164,6 +173,8 @@ class Episode:
         self.in_flight: list[_InFlight] = []
         self.records: list[LocalizationRecord] = []
         self.reinits: list[Reinitialization] = []
+        self.lock_losses_s: list[float] = []
+        self.lock_lost_since_s: float | None = None
         self.segments: list[Segment] = []
         self.columns = _Columns()
         self.segment_start_s = 0.0
@@ -249,6 +260,18 @@ class Episode:
         self.segment_start_s = float(self.path.s_m[index])
         self._restart_at(index, t)
 
+    def _check_lock(self, t: float, state: VehicleState) -> None:
+        """``ground_truth`` drives: reset the EKF at the true pose once it has lost lock."""
+        x, y, _ = self._ekf_pose()
+        if np.hypot(x - state.x_m, y - state.y_m) <= self.config.lock_lost_m:
+            self.lock_lost_since_s = None
+        elif self.lock_lost_since_s is None:
+            self.lock_lost_since_s = t
+        elif t - self.lock_lost_since_s >= self.config.lock_lost_s - 1e-9:
+            self.ekf.reset(*self._rear(state.x_m, state.y_m, state.yaw_rad), t)
+            self.lock_losses_s.append(t)
+            self.lock_lost_since_s = None
+
     # -- the loop ----------------------------------------------------------------------------
     def run(self) -> EpisodeResult:
         c = self.config
@@ -287,6 +310,8 @@ class Episode:
             ) or self.detector.check(t, new.x_m, new.y_m, new.speed_mps, proj.distance_m)
             if failure is not None and not self.progress.finished:
                 self._fail(failure, t)
+            if not navigate:
+                self._check_lock(t, new)
         if c.record_trajectory:
             self.columns.add(t, self.sim.state, self._ekf_pose())
         for p in self.in_flight:
@@ -304,6 +329,7 @@ class Episode:
             sim_time_s=t,
             wall_time_s=time.perf_counter() - wall0,
             reinitializations=tuple(self.reinits),
+            lock_losses_s=tuple(self.lock_losses_s),
             segments=tuple(self.segments),
             tracking_error_mean_m=float(np.mean(self.offsets_m)) if self.offsets_m else 0.0,
             final_drift_m=float(np.hypot(ex - end.x_m, ey - end.y_m)),

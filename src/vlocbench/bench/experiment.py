@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from vlocbench.bench.episode import EpisodeConfig
+from vlocbench.bench.episode import EPISODE_VERSION, EpisodeConfig
 from vlocbench.config import config_hash, from_dict, load_yaml, require, to_dict
 from vlocbench.errors import ConfigError, UnknownNameError
 from vlocbench.loc.localizer import LocalizerConfig
@@ -334,6 +334,7 @@ def expand(spec: ExperimentSpec, map_dirs: Mapping[tuple[str, str], str]) -> lis
                         "kind": kind,
                         "town": town_dict,
                         "scene": SCENE_VERSION,
+                        "episode_version": EPISODE_VERSION,
                         "route_length_m": spec.route_length_m,
                         "world": world,
                         "method": method,

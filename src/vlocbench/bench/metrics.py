@@ -57,6 +57,7 @@ class EpisodeMetrics:
     queries: int
     recall: tuple[float, ...]  # raw localization, at RECALL_THRESHOLDS
     recall_ekf: tuple[float, ...]  # the fused pose at every simulation step
+    lock_losses_per_km: float  # ground_truth drives: EKF resets at the truth per km of route
     ct_mean_s: float  # mean computation time per query (NaN without queries)
     sim_time_s: float
     wall_time_s: float
@@ -84,6 +85,7 @@ def episode_metrics(result: EpisodeResult) -> EpisodeMetrics:
             np.array([x.position_error_m for x in locs]), np.array([x.yaw_error_deg for x in locs])
         ),
         recall_ekf=recall(tr.ekf_position_error_m, ekf_yaw_err) if len(tr.time_s) else (),
+        lock_losses_per_km=len(result.lock_losses_s) / (result.route_length_m / 1000.0),
         ct_mean_s=float(np.mean([x.compute_time_s for x in locs])) if locs else float("nan"),
         sim_time_s=result.sim_time_s,
         wall_time_s=result.wall_time_s,

@@ -97,6 +97,7 @@ class EpisodeResult:
     sim_time_s: float
     wall_time_s: float
     reinitializations: tuple[Reinitialization, ...]
+    lock_losses_s: tuple[float, ...]  # ground_truth drives: when the EKF was reset at the truth
     segments: tuple[Segment, ...]
     tracking_error_mean_m: float  # mean distance of the true position from the route
     final_drift_m: float  # EKF position error at the end

@@ -92,7 +92,10 @@ def recall_table(summary: Summary, town: str, fused: bool = False) -> Table:
         for s in summary.setups:
             c = summary.cell(town, method, s.label)
             r = None if c is None else (c.recall_ekf if fused else c.recall)
-            row.append(" / ".join(_fmt(100 * v) for v in r[:3]) if r else "–")
+            text = " / ".join(_fmt(100 * v) for v in r[:3]) if r else "–"
+            if r and fused and c is not None and np.isfinite(c.lock_losses_per_km):
+                text += f" ({_fmt(c.lock_losses_per_km)}/km)"
+            row.append(text)
         rows.append(row)
     return header, rows
 
@@ -156,7 +159,8 @@ def _tables(summary: Summary) -> list[tuple[str, Table]]:
         if summary.spec.recall and summary.spec.methods:
             out.append((f"{name}: recall (%) at (0.25 m, 2°) / (0.5 m, 5°) / (5 m, 10°), "
                         "ground-truth drive, raw localization", recall_table(summary, town)))  # fmt: skip
-            out.append((f"{name}: recall (%) of the fused (EKF) pose at every step, same drive",
+            out.append((f"{name}: recall (%) of the fused (EKF) pose at every step, same drive "
+                        "(lock losses per km: the EKF reset at the truth)",
                         recall_table(summary, town, fused=True)))  # fmt: skip
         out.append((f"{name}: where failures happen (25 m stretches of the route) and the "
                     "mean tracking error", fragmentation_table(summary, town)))  # fmt: skip

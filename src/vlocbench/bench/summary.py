@@ -31,6 +31,7 @@ class Cell:
     failure: FailureRate | None  # None: no failure episodes
     recall: tuple[float, ...] | None  # raw localization, ground-truth drive
     recall_ekf: tuple[float, ...] | None
+    lock_losses_per_km: float  # of the EKF in the ground-truth drive (NaN: none, or not recorded)
     ct_s: float  # mean computation time per query (NaN: none)
     fragmentation: Fragmentation | None
     tracking_error_m: float
@@ -103,6 +104,10 @@ def summarize(spec: ExperimentSpec, rows: Sequence[EpisodeRow]) -> Summary:
             failure=failure_rate([m["failures_per_km"] for m in fail]) if fail else None,
             recall=tuple(rec[0]["recall"]) if rec else None,
             recall_ekf=tuple(rec[0]["recall_ekf"]) if rec else None,
+            # results stored before EPISODE_VERSION 2 have no lock losses
+            lock_losses_per_km=rec[0].get("lock_losses_per_km", float("nan"))
+            if rec
+            else float("nan"),
             ct_s=_mean([r.metrics["ct_mean_s"] for r in group]),
             fragmentation=fragmentation(sites) if fail else None,
             tracking_error_m=_mean([m["tracking_error_mean_m"] for m in fail]),
