@@ -31,9 +31,8 @@ def test_local_pool_retries_the_episode_of_a_dead_worker(tmp_path, control):
     (control / "die-illumination.k=6-sift-vlad-1").touch()  # one failure episode's worker dies once
     (control / "always-die-illumination.k=0-sift-vlad-0").touch()  # these die on every attempt
     with ResultStore(tmp_path / "out", "fake") as store:
-        finished, errors, retried, _, _ = execute(
-            tasks, store, workers=2, runner=run_fake, progress=False
-        )
+        e = execute(tasks, store, workers=2, runner=run_fake, progress=False)
+        finished, errors, retried = e.finished, e.errors, e.retried
         rows = {(r.setup, r.kind, r.repetition): r for r in store.rows(None) or []}
         done = store.done_keys()
     # the two always-dying tasks (recall and failure rep 0 at k = 0) end as errors after 3 attempts
@@ -57,11 +56,12 @@ def test_dask_cluster_on_loopback(tmp_path, control):
         dashboard_address=None, local_directory=str(tmp_path / "dask"),
     )  # fmt: skip
     with cluster, ResultStore(tmp_path / "out", "fake") as store:
-        finished, errors, _, _, _ = execute(
+        e = execute(
             tasks, store, scheduler=cluster.scheduler_address, runner=run_fake, progress=False
         )
         assert store.done_keys() == {t.key for t in tasks}
-    assert (finished, errors) == (len(tasks), 0)
+    assert (e.finished, e.errors) == (len(tasks), 0)
+    assert e.slots == 2  # the cluster's threads, whatever --workers says
     assert not (control / "die-illumination.k=6-sift-vlad-1").exists()  # it did die, once
 
 

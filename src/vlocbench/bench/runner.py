@@ -47,6 +47,19 @@ class EpisodeOutcome:
 
 
 @dataclass(frozen=True)
+class Execution:
+    """What :func:`execute` did: episodes finished, ended in an error and rerun after their worker
+    died; seconds in episodes (summed over workers) and writing; the most episodes at once."""
+
+    finished: int
+    errors: int
+    retried: int
+    episode_s: float
+    store_s: float
+    slots: int
+
+
+@dataclass(frozen=True)
 class RunSummary:
     output_dir: Path
     total: int
@@ -58,13 +71,13 @@ class RunSummary:
     episodes_wall_s: float  # the episode phase
     episode_s: float  # the sum of the episodes' times in their workers
     store_s: float  # the driver's time writing results (metrics, Parquet, SQLite)
-    workers: int
+    slots: int  # episodes that could run at once: local workers, or the Dask cluster's threads
 
     @property
     def harness_overhead(self) -> float:
         """Episode-phase time beyond the workers' episode time, as a fraction of the latter
         (storing, scheduling, transfers, idle workers at the end)."""
-        busy = self.episode_s / self.workers
+        busy = self.episode_s / self.slots
         return 0.0 if busy <= 0 else max(0.0, self.episodes_wall_s / busy - 1)
 
     @property
@@ -223,9 +236,8 @@ def execute(
     runner: Callable[[EpisodeTask], EpisodeOutcome] = run_task,
     max_attempts: int = 3,
     progress: bool = True,
-) -> tuple[int, int, int, float, float]:
-    """Run ``tasks``, writing each outcome as it arrives: (finished, errors, retried, seconds in
-    episodes, seconds writing).
+) -> Execution:
+    """Run ``tasks``, writing each outcome as it arrives.
 
     ``workers == 1`` without a scheduler runs in this process. Otherwise at most one episode per
     worker is in flight, so a worker that dies takes only the episodes in flight with it: they are
@@ -235,6 +247,7 @@ def execute(
     bar = _Progress(len(tasks), progress)
     finished = errors = retried = 0
     episode_s = store_s = 0.0
+    slots = workers
 
     def record(task: EpisodeTask, outcome: EpisodeOutcome | None, error: str | None,
                attempts: int) -> None:  # fmt: skip
@@ -259,11 +272,12 @@ def execute(
                     record(task, None, traceback.format_exc(limit=8), 1)
                     continue
                 record(task, outcome, None, 1)
-            return finished, errors, retried, episode_s, store_s
+            return Execution(finished, errors, retried, episode_s, store_s, slots)
         attempts = dict.fromkeys((t.key for t in tasks), 0)
         pending = deque(tasks)
         while pending:
-            executor, client, window = _executor(workers, scheduler)
+            executor, client, slots = _executor(workers, scheduler)
+            window = slots if client is None else 2 * slots  # Dask: keep its workers fed
             running: dict[cf.Future, EpisodeTask] = {}
             lost: list[EpisodeTask] = []
             interrupted = True  # until the loop ends normally (Ctrl-C, a store error)
@@ -306,7 +320,7 @@ def execute(
                     for future in running:
                         future.cancel()
                     client.close()
-        return finished, errors, retried, episode_s, store_s
+        return Execution(finished, errors, retried, episode_s, store_s, slots)
     finally:
         bar.close()
 
@@ -323,7 +337,7 @@ def _describe(exc: BaseException) -> str:
 
 
 def _executor(workers: int, scheduler: str | None) -> tuple[cf.Executor, Any, int]:
-    """The executor, its Dask client (or None) and how many episodes to keep in flight."""
+    """The executor, its Dask client (or None) and how many episodes it runs at once."""
     if scheduler is None:
         return _local_pool(workers), None, workers
     try:
@@ -337,7 +351,7 @@ def _executor(workers: int, scheduler: str | None) -> tuple[cf.Executor, Any, in
     except OSError as exc:
         raise ConfigError("--scheduler", f"cannot reach {scheduler}: {exc}") from None
     threads = sum(client.nthreads().values()) or workers
-    return client.get_executor(pure=False), client, 2 * threads
+    return client.get_executor(pure=False), client, threads
 
 
 def run_experiment(
@@ -362,12 +376,10 @@ def run_experiment(
             f"{len(tasks) - len(todo)} already done, {len(todo)} to run"
         )
         t1 = time.perf_counter()
-        finished, errors, retried, episode_s, store_s = execute(
-            _order(todo), store, workers, scheduler, runner, progress=progress
-        )
+        e = execute(_order(todo), store, workers, scheduler, runner, progress=progress)
         return RunSummary(
-            spec.output_dir, len(tasks), len(tasks) - len(todo), finished, errors, retried,
-            time.perf_counter() - t0, time.perf_counter() - t1, episode_s, store_s, workers,
+            spec.output_dir, len(tasks), len(tasks) - len(todo), e.finished, e.errors, e.retried,
+            time.perf_counter() - t0, time.perf_counter() - t1, e.episode_s, e.store_s, e.slots,
         )  # fmt: skip
 
 
