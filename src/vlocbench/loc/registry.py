@@ -24,7 +24,7 @@ FEATURES: dict[str, tuple[str, dict[str, Any]]] = {
     "orb-teblid": ("vlocbench.loc.features:OrbTeblidExtractor", {"max_keypoints": 2048}),
     "aliked": ("vlocbench.loc.learned:AlikedExtractor", {"max_keypoints": 1024}),
     "disk": ("vlocbench.loc.learned:DiskExtractor", {"max_keypoints": 1024}),
-    "xfeat": ("vlocbench.loc.learned:XFeatExtractor", {"max_keypoints": 2048}),
+    "xfeat": ("vlocbench.loc.learned:XFeatExtractor", {"max_keypoints": 1024}),
 }
 MATCHERS: dict[str, tuple[str, dict[str, Any]]] = {
     "nn-ratio": ("vlocbench.loc.matchers:MutualNearestNeighbor", {"ratio": 0.8}),
