@@ -21,3 +21,17 @@ def test_visual_localizer_in_a_ground_truth_episode(small_town, stretch, sift_ma
     assert all(x.compute_time_s > 0 for x in recs)
     # the vehicle pose comes through the camera's mounting: the yaw is the car's, not the camera's
     assert np.median([x.yaw_error_deg for x in recs if x.success]) < 1.0
+
+
+def test_a_two_camera_rig_in_a_ground_truth_episode(small_town, stretch, sift_map):
+    from vlocbench.sim import Camera, Extrinsics
+
+    back = Camera("right-back", CAMERA.intrinsics, Extrinsics(x_m=0.0, yaw_deg=-70.0))
+    localizer = VisualLocalizer(sift_map[0], (CAMERA, back), name="sift-rig")
+    sim = Simulator(small_town)
+    r = run_episode(sim, stretch.head(30.0), localizer, EpisodeConfig(mode="ground_truth"))
+    sim.close()
+    ok = [x for x in r.localizations if x.success]
+    assert len(ok) >= 0.9 * len(r.localizations) >= 9
+    assert np.median([x.position_error_m for x in ok]) < 0.1
+    assert np.median([x.yaw_error_deg for x in ok]) < 1.0

@@ -151,3 +151,33 @@ def test_bad_localizer_and_mapping_configs():
         LocalizerConfig(confident_inliers=-1)
     with pytest.raises(ConfigError, match=r"mapping\.pairs"):
         MappingConfig(pairs="random")
+
+
+def test_a_rig_is_localized_by_one_generalized_pnp(sim, stretch, sift_map):
+    from vlocbench.sim import Camera, Extrinsics
+
+    back = Camera("right-back", CAMERA.intrinsics, Extrinsics(x_m=0.0, yaw_deg=-70.0))
+    rig = (CAMERA, back)
+    sim.teleport(*query_pose(stretch, 8))
+    frames = sim.render(list(rig))
+    world_from_vehicle = sim.state.world_from_vehicle()
+    localizer = MapLocalizer(sift_map[0])
+    models = [camera_model(c) for c in rig]
+    mounts = [c.extrinsics.vehicle_from_cam() for c in rig]
+    result = localizer.localize_rig([f.image for f in frames], models, mounts)
+    assert result.success and result.generalized, result.reason
+    assert all(r.success for r in result.cameras)
+    assert result.num_inliers > max(r.num_inliers for r in result.cameras)
+    dt, dr = _errors(result.world_from_rig, world_from_vehicle)
+    assert dt < 0.25 and dr < 2.0
+    assert set(result.seconds) == {"features", "retrieval", "matching", "pnp"}
+    # a blind camera: the other one's pose, through its mounting
+    black = np.zeros_like(frames[0].image)
+    one = localizer.localize_rig([black, frames[1].image], models, mounts)
+    assert one.success and not one.generalized and not one.cameras[0].success
+    dt, dr = _errors(one.world_from_rig, world_from_vehicle)
+    assert dt < 0.25 and dr < 2.0
+    blind = localizer.localize_rig([black, black], models, mounts)
+    assert not blind.success and "camera 0: only 0 features" in blind.reason
+    with pytest.raises(LocalizationError, match="one image, camera and mounting per camera"):
+        localizer.localize_rig([black], models, mounts)

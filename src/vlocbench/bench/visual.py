@@ -1,7 +1,9 @@
 """Visual localization in the episode loop: a map-based localizer behind the ``Localizer`` protocol.
 
-Each camera of the rig is localized on its own; the camera with the most PnP inliers gives the
-vehicle pose through its known mounting (``world_from_vehicle = world_from_cam @ cam_from_vehicle``).
+The cameras are one rig whose frame is the vehicle's: each is localized on its own, then one
+generalized PnP over all their correspondences gives ``world_from_vehicle`` directly (or the best
+camera's pose through its mounting, ``world_from_cam @ cam_from_vehicle``, when that has more
+inliers or only one camera found its place).
 """
 
 from __future__ import annotations
@@ -10,11 +12,9 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
-import numpy as np
-
 from vlocbench.bench.localizer import LocalizationQuery, PoseEstimate
 from vlocbench.loc.gallery import CameraModel
-from vlocbench.loc.localizer import LocalizerConfig, MapLocalizer, QueryResult
+from vlocbench.loc.localizer import LocalizerConfig, MapLocalizer
 from vlocbench.sim import Camera
 
 
@@ -47,31 +47,28 @@ class VisualLocalizer:
         """Stateless, and its RANSAC is seeded by its config."""
 
     def localize(self, query: LocalizationQuery) -> PoseEstimate:
+        """All cameras as one rig (the vehicle frame): a generalized PnP over their matches."""
         start = time.perf_counter()
-        best: tuple[QueryResult, Camera] | None = None
-        reasons = []
-        for frame in query.frames:
-            vehicle_from_cam = frame.camera.extrinsics.vehicle_from_cam()
-            prior = query.prior_world_from_vehicle @ vehicle_from_cam
-            result = self.localizer.localize(frame.image, camera_model(frame.camera), prior)
-            if not result.success:
-                reasons.append(f"{frame.camera.name}: {result.reason}")
-            elif best is None or result.num_inliers > best[0].num_inliers:
-                best = (result, frame.camera)
-        elapsed = time.perf_counter() - start
-        if best is None:
-            return PoseEstimate.failure("; ".join(reasons) or "no images", elapsed)
-        result, camera = best
-        assert result.world_from_cam is not None
-        world_from_vehicle = result.world_from_cam @ np.linalg.inv(
-            camera.extrinsics.vehicle_from_cam()
+        if not query.frames:
+            return PoseEstimate.failure("no images", 0.0)
+        result = self.localizer.localize_rig(
+            [frame.image for frame in query.frames],
+            [camera_model(frame.camera) for frame in query.frames],
+            [frame.camera.extrinsics.vehicle_from_cam() for frame in query.frames],
+            query.prior_world_from_vehicle,
         )
+        elapsed = time.perf_counter() - start
+        if not result.success:
+            return PoseEstimate.failure(result.reason, elapsed)
+        assert result.world_from_rig is not None
+        own = max(result.cameras, key=lambda r: (r.success, r.num_inliers))
         info = {
-            "camera": camera.name,
+            "camera": "rig" if result.generalized else
+                      query.frames[result.cameras.index(own)].camera.name,
             "inliers": result.num_inliers,
-            "correspondences": result.num_correspondences,
-            "retrieved": result.retrieved,
+            "correspondences": sum(r.num_correspondences for r in result.cameras),
+            "retrieved": [name for r in result.cameras for name in r.retrieved],
             "seconds": result.seconds,
-            "fallback": result.fallback,
-        }
-        return PoseEstimate(True, world_from_vehicle, None, elapsed, result.reason, info)
+            "fallback": not result.generalized and own.fallback,
+        }  # fmt: skip
+        return PoseEstimate(True, result.world_from_rig, None, elapsed, own.reason, info)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -67,6 +68,27 @@ class QueryResult:
     seconds: dict[str, float] = field(default_factory=dict)
     reason: str = ""
     fallback: bool = False
+
+
+@dataclass(frozen=True)
+class RigResult:
+    """A rig's query: ``world_from_rig`` (4, 4) on success, from one generalized PnP over the
+    cameras' correspondences (or the best camera's own pose when that has more inliers, or only one
+    camera found its place); ``cameras``: each camera's own result."""
+
+    success: bool
+    world_from_rig: NDArray[np.float64] | None
+    num_inliers: int
+    generalized: bool  # the pose is the generalized PnP's
+    cameras: tuple[QueryResult, ...]
+    seconds: dict[str, float]
+    reason: str = ""
+
+
+@dataclass(frozen=True)
+class _Correspondences:
+    points2D: NDArray[np.float64]  # (M, 2) COLMAP pixel coordinates
+    points3D: NDArray[np.float64]  # (M, 3) world
 
 
 @dataclass
@@ -162,6 +184,15 @@ class MapLocalizer:
         prior_world_from_cam: NDArray[np.float64] | None = None,
     ) -> QueryResult:
         """Localize one image taken by ``camera``; ``prior_world_from_cam`` for pose-prior maps."""
+        return self._solve(image, camera, prior_world_from_cam)[0]
+
+    def _solve(
+        self,
+        image: NDArray[np.uint8],
+        camera: CameraModel,
+        prior_world_from_cam: NDArray[np.float64] | None,
+    ) -> tuple[QueryResult, _Correspondences | None]:
+        """The result, and the 2D-3D correspondences of the winning cluster (None without one)."""
         c, seconds = self.config, {}
         image = check_image(image, "query image")
         if image.shape[:2] != (camera.height, camera.width):
@@ -176,8 +207,9 @@ class MapLocalizer:
         seconds["retrieval"] = time.perf_counter() - t
         names = tuple(self.images[i].name for i in retrieved)
         if len(feats) < c.min_inliers:
-            return self._failed(retrieved, seconds, f"only {len(feats)} features in the image")
-        best: tuple[int, dict | None, list[int], int] = (0, None, [], 0)
+            reason = f"only {len(feats)} features in the image"
+            return self._failed(retrieved, seconds, reason), None
+        best: tuple[int, dict | None, list[int], _Correspondences | None] = (0, None, [], None)
         cam = colmap_camera(camera, 1)
         options = pycolmap.AbsolutePoseEstimationOptions()
         options.ransac.max_error = c.ransac_max_error_px
@@ -199,28 +231,90 @@ class MapLocalizer:
                 if len(q) < c.min_inliers:
                     continue
                 t = time.perf_counter()
+                corr = _Correspondences(
+                    feats.keypoints[q].astype(np.float64) + 0.5, np.asarray(xyz, np.float64)
+                )
                 answer = pycolmap.estimate_and_refine_absolute_pose(
-                    feats.keypoints[q].astype(np.float64) + 0.5,
-                    np.asarray(xyz, np.float64), cam, options, return_covariance=True,
-                )  # fmt: skip
+                    corr.points2D, corr.points3D, cam, options, return_covariance=True
+                )
                 seconds["pnp"] += time.perf_counter() - t
                 if answer is not None and answer["num_inliers"] > best[0]:
-                    best = (int(answer["num_inliers"]), answer, cluster[: n + 1], len(q))
+                    best = (int(answer["num_inliers"]), answer, cluster[: n + 1], corr)
                 if progressive and best[0] >= c.confident_inliers:
                     break
             if progressive and best[0] >= c.confident_inliers:
                 break
-        inliers, answer, cluster, n_corr = best
+        inliers, answer, cluster, corr = best
+        n_corr = 0 if corr is None else len(corr.points2D)
         if answer is None or inliers < c.min_inliers:
-            return self._failed(retrieved, seconds, f"PnP found {inliers} inliers (< {c.min_inliers})",
-                                n_corr)  # fmt: skip
+            reason = f"PnP found {inliers} inliers (< {c.min_inliers})"
+            return self._failed(retrieved, seconds, reason, n_corr), corr
         cam_from_world = np.vstack([answer["cam_from_world"].matrix(), [0, 0, 0, 1]])
         return QueryResult(
             True, np.linalg.inv(cam_from_world), inliers, n_corr, names,
             tuple(self.images[i].name for i in cluster),
             np.asarray(answer.get("covariance")) if answer.get("covariance") is not None else None,
             seconds,
-        )  # fmt: skip
+        ), corr  # fmt: skip
+
+    def localize_rig(
+        self,
+        images: Sequence[NDArray[np.uint8]],
+        cameras: Sequence[CameraModel],
+        rig_from_cams: Sequence[NDArray[np.float64]],
+        prior_world_from_rig: NDArray[np.float64] | None = None,
+    ) -> RigResult:
+        """Localize the images taken at one instant by the cameras of a rig (mounted at
+        ``rig_from_cams``, each (4, 4)): each camera as :meth:`localize` does, then one
+        generalized PnP with LO-RANSAC over the correspondences of every camera's winning cluster,
+        so that cameras that see little still add their constraints."""
+        c = self.config
+        if not (len(images) == len(cameras) == len(rig_from_cams) >= 1):
+            raise LocalizationError(
+                f"a rig query needs one image, camera and mounting per camera; got "
+                f"{len(images)}, {len(cameras)} and {len(rig_from_cams)}"
+            )
+        results, pooled = [], []
+        for k, (image, camera, rig_from_cam) in enumerate(zip(images, cameras, rig_from_cams)):
+            prior = None if prior_world_from_rig is None else prior_world_from_rig @ rig_from_cam
+            result, corr = self._solve(image, camera, prior)
+            results.append(result)
+            if corr is not None:
+                pooled.append((k, corr))
+        seconds = {stage: sum(r.seconds.get(stage, 0.0) for r in results)
+                   for stage in results[0].seconds}  # fmt: skip
+        # the best camera's own pose; one from a retrieved image (fallback) only when none has PnP
+        found = [(not r.fallback, r.num_inliers, k) for k, r in enumerate(results) if r.success]
+        pnp, best_inliers, best_k = max(found, default=(False, 0, -1))
+        best_inliers = best_inliers if pnp else 0
+        if len(pooled) >= 2:
+            options = pycolmap.RANSACOptions()
+            options.max_error = c.ransac_max_error_px
+            options.random_seed = c.ransac_seed
+            t = time.perf_counter()
+            answer = pycolmap.estimate_and_refine_generalized_absolute_pose(
+                np.concatenate([corr.points2D for _, corr in pooled]),
+                np.concatenate([corr.points3D for _, corr in pooled]),
+                [k for k, corr in pooled for _ in range(len(corr.points2D))],
+                [pycolmap.Rigid3d(np.linalg.inv(m)[:3, :4]) for m in rig_from_cams],
+                [colmap_camera(cam, k + 1) for k, cam in enumerate(cameras)],
+                options,
+            )  # fmt: skip
+            seconds["pnp"] = seconds.get("pnp", 0.0) + time.perf_counter() - t
+            # its num_inliers can count a 3D point that two cameras see once; the mask counts
+            # correspondences, as the single-camera PnP does
+            inliers = 0 if answer is None else int(np.sum(answer["inlier_mask"]))
+            if answer is not None and inliers > best_inliers and inliers >= c.min_inliers:
+                rig_from_world = np.vstack([answer["rig_from_world"].matrix(), [0, 0, 0, 1]])
+                return RigResult(True, np.linalg.inv(rig_from_world), inliers, True,
+                                 tuple(results), seconds)  # fmt: skip
+        if best_k >= 0:
+            world_from_cam = results[best_k].world_from_cam
+            assert world_from_cam is not None
+            world_from_rig = world_from_cam @ np.linalg.inv(rig_from_cams[best_k])
+            return RigResult(True, world_from_rig, best_inliers, False, tuple(results), seconds)
+        reason = "; ".join(f"camera {k}: {r.reason}" for k, r in enumerate(results))
+        return RigResult(False, None, 0, False, tuple(results), seconds, reason)
 
     def _failed(self, retrieved: NDArray[np.int64], seconds: dict[str, float], reason: str,
                 n_corr: int = 0) -> QueryResult:  # fmt: skip
