@@ -35,3 +35,21 @@ def test_a_two_camera_rig_in_a_ground_truth_episode(small_town, stretch, sift_ma
     assert len(ok) >= 0.9 * len(r.localizations) >= 9
     assert np.median([x.position_error_m for x in ok]) < 0.1
     assert np.median([x.yaw_error_deg for x in ok]) < 1.0
+
+
+def test_sequential_localization_from_the_ekf_prior_navigates(
+    small_town, stretch, gallery, tmp_path
+):
+    from vlocbench.loc.mapping import build_map
+    from vlocbench.loc.registry import method_conf
+
+    build_map(gallery, method_conf("sift-prior"), tmp_path / "prior")
+    localizer = VisualLocalizer(tmp_path / "prior", (CAMERA,), name="sift-prior")
+    sim = Simulator(small_town)
+    r = run_episode(sim, stretch, localizer, EpisodeConfig(seed=3))
+    sim.close()
+    assert r.completed and r.failures == 0
+    ok = [x for x in r.localizations if x.success]
+    assert len(ok) >= 0.8 * len(r.localizations) >= 20
+    assert np.median([x.position_error_m for x in ok]) < 0.1
+    assert np.percentile(r.trajectory.ekf_position_error_m, 95) < 0.5

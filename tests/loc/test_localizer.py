@@ -89,10 +89,10 @@ def test_unmapped_place_and_featureless_image_fail_cleanly(sim, small_town, sift
 
 def test_pose_prior_retrieval(sim, stretch, gallery, tmp_path):
     from vlocbench.loc.mapping import build_map
-    from vlocbench.loc.registry import MethodConf
+    from vlocbench.loc.registry import method_conf
 
     out = tmp_path / "prior"
-    build_map(gallery, MethodConf("sift", "nn-ratio", "pose-prior"), out)
+    build_map(gallery, method_conf("sift-prior"), out)
     localizer = MapLocalizer(out)
     assert localizer.needs_prior
     frame = _render(sim, query_pose(stretch, 12))

@@ -25,7 +25,7 @@ def test_plugin_by_dotted_path_and_cache_reuse(gallery, tmp_path):
 def test_unknown_and_broken_methods():
     with pytest.raises(
         UnknownNameError,
-        match="aliked-lightglue, disk-lightglue, orb-teblid, sift, sift-vlad, xfeat-lighterglue",
+        match="aliked-lightglue, disk-lightglue, orb-teblid, sift, sift-prior, sift-vlad, xfeat-lighterglue",
     ):
         method_conf("superpoint")
     with pytest.raises(UnknownNameError, match="dotted path"):

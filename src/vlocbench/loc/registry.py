@@ -55,6 +55,8 @@ class MethodConf:
 METHODS: dict[str, MethodConf] = {
     "sift": MethodConf("sift", "nn-ratio", "effnet-gem"),
     "sift-vlad": MethodConf("sift", "nn-ratio", "vlad"),  # no PyTorch at all
+    # sequential localization: the gallery images nearest to the EKF's pose, no global descriptor
+    "sift-prior": MethodConf("sift", "nn-ratio", POSE_PRIOR),
     "orb-teblid": MethodConf("orb-teblid", "nn-hamming", "vlad"),
     "aliked-lightglue": MethodConf("aliked", "lightglue-aliked", "effnet-gem"),
     "disk-lightglue": MethodConf("disk", "lightglue-disk", "effnet-gem"),
