@@ -61,14 +61,12 @@ class VisualLocalizer:
         if not result.success:
             return PoseEstimate.failure(result.reason, elapsed)
         assert result.world_from_rig is not None
-        own = max(result.cameras, key=lambda r: (r.success, r.num_inliers))
         info = {
-            "camera": "rig" if result.generalized else
-                      query.frames[result.cameras.index(own)].camera.name,
+            "camera": "rig" if result.generalized else query.frames[result.camera].camera.name,
             "inliers": result.num_inliers,
             "correspondences": sum(r.num_correspondences for r in result.cameras),
             "retrieved": [name for r in result.cameras for name in r.retrieved],
             "seconds": result.seconds,
-            "fallback": not result.generalized and own.fallback,
-        }  # fmt: skip
-        return PoseEstimate(True, result.world_from_rig, None, elapsed, own.reason, info)
+            "fallback": not result.generalized and result.cameras[result.camera].fallback,
+        }
+        return PoseEstimate(True, result.world_from_rig, None, elapsed, result.reason, info)

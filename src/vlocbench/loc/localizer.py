@@ -79,10 +79,14 @@ class RigResult:
     success: bool
     world_from_rig: NDArray[np.float64] | None
     num_inliers: int
-    generalized: bool  # the pose is the generalized PnP's
+    camera: int  # the camera whose own pose it is; -1: the generalized PnP's (or none)
     cameras: tuple[QueryResult, ...]
     seconds: dict[str, float]
     reason: str = ""
+
+    @property
+    def generalized(self) -> bool:
+        return self.success and self.camera < 0
 
 
 @dataclass(frozen=True)
@@ -306,15 +310,16 @@ class MapLocalizer:
             inliers = 0 if answer is None else int(np.sum(answer["inlier_mask"]))
             if answer is not None and inliers > best_inliers and inliers >= c.min_inliers:
                 rig_from_world = np.vstack([answer["rig_from_world"].matrix(), [0, 0, 0, 1]])
-                return RigResult(True, np.linalg.inv(rig_from_world), inliers, True,
+                return RigResult(True, np.linalg.inv(rig_from_world), inliers, -1,
                                  tuple(results), seconds)  # fmt: skip
         if best_k >= 0:
-            world_from_cam = results[best_k].world_from_cam
-            assert world_from_cam is not None
-            world_from_rig = world_from_cam @ np.linalg.inv(rig_from_cams[best_k])
-            return RigResult(True, world_from_rig, best_inliers, False, tuple(results), seconds)
+            best = results[best_k]
+            assert best.world_from_cam is not None
+            world_from_rig = best.world_from_cam @ np.linalg.inv(rig_from_cams[best_k])
+            return RigResult(True, world_from_rig, best_inliers, best_k, tuple(results), seconds,
+                             best.reason)  # fmt: skip
         reason = "; ".join(f"camera {k}: {r.reason}" for k, r in enumerate(results))
-        return RigResult(False, None, 0, False, tuple(results), seconds, reason)
+        return RigResult(False, None, 0, -1, tuple(results), seconds, reason)
 
     def _failed(self, retrieved: NDArray[np.int64], seconds: dict[str, float], reason: str,
                 n_corr: int = 0) -> QueryResult:  # fmt: skip
