@@ -181,5 +181,9 @@ def test_bad_episode_config():
         from_dict(EpisodeConfig, {"sede": 1})
     with pytest.raises(ConfigError, match=r"ekf\.metric_gate_m"):
         from_dict(EpisodeConfig, {"ekf": {"metric_gate_m": -1}})
+    with pytest.raises(ConfigError, match="lock_lost_m: must be > 0"):
+        from_dict(EpisodeConfig, {"lock_lost_m": 0})
+    with pytest.raises(ConfigError, match="lock_lost_s: must be >= 0"):
+        EpisodeConfig(lock_lost_s=-1.0)
     cfg = from_dict(EpisodeConfig, {"latency": {"mode": "none"}, "ekf": {"metric_gate_m": None}})
     assert cfg.latency.mode == "none" and cfg.ekf.metric_gate_m is None

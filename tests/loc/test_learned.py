@@ -72,6 +72,14 @@ def _match_two_gallery_images(gallery, features, matcher, i=10, j=11):
     return fa, fb, matches
 
 
+def test_lightglue_for_features_without_weights_lists_the_valid_ones():
+    from vlocbench.errors import UnknownNameError
+    from vlocbench.loc.learned import LightGlueMatcher
+
+    with pytest.raises(UnknownNameError, match="valid: aliked, disk, xfeat"):
+        LightGlueMatcher(features="sift")
+
+
 def test_disk_features_and_lightglue_match_offline(offline, gallery):
     fa, _, matches = _match_two_gallery_images(gallery, "disk", "lightglue-disk")
     assert len(fa) > 200 and fa.descriptors.shape[1] == 128
