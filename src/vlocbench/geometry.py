@@ -60,6 +60,14 @@ def invert_pose(a_from_b: Array) -> Array:
     return out
 
 
+def pose_error(true_world_from_a: Array, est_world_from_a: Array) -> tuple[float, float]:
+    """(3D position error m, rotation error deg) between two (4, 4) poses: the distance between
+    their origins and the angle of the rotation between them, arccos((trace(R_t^T R_e) - 1) / 2)."""
+    position = float(np.linalg.norm(est_world_from_a[:3, 3] - true_world_from_a[:3, 3]))
+    cos = (np.trace(true_world_from_a[:3, :3].T @ est_world_from_a[:3, :3]) - 1.0) / 2.0
+    return position, float(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
+
+
 def transform_points(a_from_b: Array, points_b: Array) -> Array:
     """Map (N, 3) points from frame b to frame a."""
     return points_b @ a_from_b[:3, :3].T + a_from_b[:3, 3]

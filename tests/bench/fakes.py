@@ -38,14 +38,46 @@ def synthetic_result(failures: int, queries: int = 4, lock_losses: int = 0) -> E
     )
     locs = tuple(
         LocalizationRecord(
-            *(0.5 * k, True, 2.0 * k + 0.1, 0, 0, 2.0 * k, 0, 0, 2.0 * k, 0, 0),
-            *(0.1, 0.5, 0.05, 0.2, True, ""),
+            time_s=0.5 * k,
+            success=True,
+            x_m=2.0 * k + 0.1,
+            y_m=0.0,
+            yaw_rad=0.0,
+            true_x_m=2.0 * k,
+            true_y_m=0.0,
+            true_yaw_rad=0.0,
+            ekf_x_m=2.0 * k,
+            ekf_y_m=0.0,
+            ekf_yaw_rad=0.0,
+            position_error_m=0.1,
+            yaw_error_deg=0.5,
+            position_error_3d_m=0.1,
+            rotation_error_deg=0.5,
+            compute_time_s=0.05,
+            latency_s=0.2,
+            fused=True,
+            reason="",
         )
         for k in range(queries)
     )
-    return EpisodeResult("fake", "navigate", "fake", 100.0, 100.0, True, 25.0, 0.01, reinit,
-                         tuple(2.0 * (k + 1) for k in range(lock_losses)),
-                         (Segment(0.0, 100.0),), 0.05, 0.1, locs, trajectory)  # fmt: skip
+    return EpisodeResult(
+        config_hash="fake",
+        mode="navigate",
+        localizer="fake",
+        route_length_m=100.0,
+        route_covered_m=100.0,
+        distance_driven_m=100.0,
+        completed=True,
+        sim_time_s=25.0,
+        wall_time_s=0.01,
+        reinitializations=reinit,
+        lock_losses_s=tuple(2.0 * (k + 1) for k in range(lock_losses)),
+        segments=(Segment(0.0, 100.0),),
+        tracking_error_mean_m=0.05,
+        final_drift_m=0.1,
+        localizations=locs,
+        trajectory=trajectory,
+    )
 
 
 def _marker(task: EpisodeTask, what: str) -> Path | None:

@@ -1,7 +1,20 @@
+import dataclasses
+
 import numpy as np
+import pytest
 
 from tests.bench.fakes import synthetic_result
-from vlocbench.bench.metrics import episode_metrics, failure_rate, fragmentation, recall
+from vlocbench.bench.metrics import (
+    confident_wrong,
+    drift_segments,
+    episode_metrics,
+    failure_rate,
+    failure_rate_by_cause,
+    fragmentation,
+    pooled_drift,
+    recall,
+)
+from vlocbench.geometry import make_pose, planar_pose, pose_error, rot_x
 
 
 def test_recall_counts_failed_localizations_as_misses():
@@ -34,6 +47,52 @@ def test_episode_metrics():
     assert m.failures == 2 and m.failures_per_km == 20.0
     assert m.failure_sites_s_m == (20.0, 40.0) and m.failure_sites_xy == ((20.0, 0.0), (40.0, 0.0))
     assert m.recall == (1.0, 1.0, 1.0, 1.0)  # 0.1 m and 0.5 deg off
+    assert m.recall_planar == (1.0, 1.0, 1.0, 1.0) and m.confident_wrong == 0.0
     assert m.recall_ekf == (1.0, 1.0, 1.0, 1.0)
     assert m.lock_losses_per_km == 30.0
     assert m.queries == 4 and m.ct_mean_s == 0.05
+
+
+def test_six_dof_errors_and_confident_wrong_answers():
+    truth = planar_pose(10.0, 5.0, 0.3)
+    tilted = truth @ make_pose(rot_x(np.radians(3.0)), np.array([0.0, 0.0, 0.2]))
+    pos, rot = pose_error(truth, tilted)
+    assert pos == pytest.approx(0.2) and rot == pytest.approx(3.0)
+    # planar errors would call this pose perfect; 6-DoF recall does not at (0.25 m, 2 deg)
+    assert recall(np.array([pos]), np.array([rot]))[:2] == (0.0, 1.0)
+    # thresholds are inclusive
+    assert recall(np.array([0.25, 0.5]), np.array([2.0, 5.0]))[:2] == (0.5, 1.0)
+    wrong = confident_wrong(np.array([0.1, 6.0, 0.2, np.nan]), np.array([1.0, 1.0, 11.0, np.nan]))
+    assert wrong == 0.5  # two of four answered beyond (5 m, 10 deg); the failure is not wrong
+    assert np.isnan(confident_wrong(np.array([]), np.array([])))
+
+
+def test_failure_rate_by_cause_adds_up_to_f():
+    causes = [("collision", "collision"), ("collision", "timeout"), ()]
+    covered = [500.0, 250.0, 500.0]
+    by_cause = failure_rate_by_cause(causes, covered)
+    assert by_cause == pytest.approx({"collision": (4 + 4 + 0) / 3, "timeout": 4 / 3})
+    assert sum(by_cause.values()) == pytest.approx(np.mean([4.0, 8.0, 0.0]))
+
+
+def test_drift_at_the_end_of_each_failure_free_stretch():
+    r = synthetic_result(failures=0)  # 100 m, the EKF 0.1 m ahead all along
+    segments = drift_segments(r)
+    assert len(segments) == 1
+    driven, pos, yaw = segments[0]
+    assert driven == pytest.approx(100.0) and pos == pytest.approx(0.1) and yaw == 0.0
+    d = pooled_drift([(100.0, 8.5, 40.0), (50.0, 2.0, 10.0)])
+    assert d.position_percent == pytest.approx((8.5 + 4.0) / 2)
+    assert d.yaw_deg_per_m == pytest.approx(0.3) and d.segments == 2
+    # a failure at 5 s splits the drive: 20 m, then 80 m (to within a 2 m sample)
+    two = drift_segments(synthetic_result(failures=1))
+    assert [s[0] for s in two] == pytest.approx([20.0, 80.0], abs=2.1)
+
+
+def test_a_timed_out_episode_counts_a_failure_over_the_route_it_covered():
+    done = synthetic_result(failures=1)
+    late = dataclasses.replace(done, completed=False, route_covered_m=40.0)
+    assert late.failure_causes == ("collision", "timeout")
+    assert late.failures == 2 and late.failures_per_km == pytest.approx(2 / 0.04)
+    m = episode_metrics(late)
+    assert not m.completed and m.failure_causes[-1] == "timeout" and m.route_covered_m == 40.0

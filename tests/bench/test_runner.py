@@ -8,7 +8,8 @@ from tests.bench.fakes import CONTROL_ENV, run_fake
 from tests.conftest import small_spec
 from vlocbench.bench.experiment import expand, load_experiment
 from vlocbench.bench.runner import execute, run_experiment
-from vlocbench.bench.store import DB_FILE, ResultStore
+from vlocbench.bench.store import DB_FILE, ResultStore, read_latest_run
+from vlocbench.bench.summary import spec_from_stored, summarize
 from vlocbench.config import to_dict
 
 
@@ -75,6 +76,29 @@ def test_an_unreachable_scheduler_is_a_clear_error(tmp_path, monkeypatch):
         execute(
             _fake_tasks(), store, scheduler="tcp://127.0.0.1:9", runner=run_fake, progress=False
         )
+
+
+def test_a_grouped_sweep_whose_keys_are_not_sorted_reports_every_cell(tmp_path):
+    """The store keeps JSON with sorted keys; the setups it gives back must be the same setups."""
+    levels = [{"fog_visual_range_m": v, "rain": 0.8, "overcast": 0.8} for v in (90, 30)]
+    spec = load_experiment({"name": "wx", "towns": ["town10"], "methods": ["sift-vlad"],
+                            "repetitions": 1, "sweep": {"weather": levels}})  # fmt: skip
+    tasks = expand(spec, {("town10", "sift-vlad"): "/nowhere/g/m"})
+    with ResultStore(tmp_path, "wx") as store:
+        store.start_run(spec.spec_hash, to_dict(spec), [t.key for t in tasks])
+        execute(tasks, store, workers=1, runner=run_fake, progress=False)
+    stored, rows = read_latest_run(tmp_path)
+    summary = summarize(spec_from_stored(stored), rows)
+    labels = [s.label for s in summary.setups]
+    assert labels == [
+        "weather(fog_visual_range_m=90, overcast=0.8, rain=0.8)",
+        "weather(fog_visual_range_m=30, overcast=0.8, rain=0.8)",
+    ]
+    for label in labels:
+        for method in ("sift-vlad", "odometry"):
+            cell = summary.cell("town10", method, label)
+            assert cell is not None and cell.failure is not None, (method, label)
+        assert summary.cell("town10", "sift-vlad", label).recall is not None
 
 
 # -- a real experiment end to end: gallery, map, episodes, store, resume, report ------------------

@@ -58,8 +58,17 @@ def test_collisions_are_debounced_over_5_m_and_5_s():
     assert det.collision(16.0, 6.0, 0.0, "curb a") is not None  # 6 m away: a new one
 
 
-def test_stuck_and_off_route():
-    det = FailureDetector(FailureConfig(stuck_s=10.0, off_route_m=5.0, off_route_s=3.0))
+def test_stuck_and_off_route_count_only_when_chosen():
+    paper = FailureDetector()  # collisions alone, as the paper counts
+    assert paper.check(30.0, 0, 0, 0.0, 50.0) is None
+    det = FailureDetector(
+        FailureConfig(
+            causes=("collision", "stuck", "off_route"),
+            stuck_s=10.0,
+            off_route_m=5.0,
+            off_route_s=3.0,
+        )
+    )
     assert det.check(5.0, 0, 0, 0.0, 0.0) is None
     f = det.check(10.0, 1.0, 2.0, 0.05, 0.0)
     assert f is not None and f.cause == "stuck" and (f.x_m, f.y_m) == (1.0, 2.0)
@@ -73,6 +82,15 @@ def test_stuck_and_off_route():
     assert f is not None and f.cause == "off_route"
 
 
+def test_collisions_can_be_left_uncounted():
+    det = FailureDetector(FailureConfig(causes=("stuck",)))
+    assert det.collision(10.0, 0.0, 0.0, "curb a") is None
+
+
 def test_bad_config():
     with pytest.raises(ConfigError, match=r"failure\.off_route_m"):
         FailureConfig(off_route_m=0)
+    with pytest.raises(
+        ConfigError, match="unknown failure cause 'crash'; valid: collision, off_route, stuck"
+    ):
+        FailureConfig(causes=("crash",))

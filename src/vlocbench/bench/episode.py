@@ -31,7 +31,7 @@ from vlocbench.bench.records import (
     Trajectory,
 )
 from vlocbench.config import config_hash, require
-from vlocbench.geometry import planar_pose, wrap_angle
+from vlocbench.geometry import Array, planar_pose, pose_error, wrap_angle
 from vlocbench.nav import (
     ControllerConfig,
     Ekf,
@@ -54,7 +54,9 @@ from vlocbench.nav import (
 from vlocbench.sim import Control, Simulator, Town, VehicleState
 
 # part of every episode key: bump when the same config gives a different result
-EPISODE_VERSION = 2
+# 3: the paper's navigation stack as the default (EKF, local planner, controller, collisions only),
+#    time-outs count as failures, 6-DoF localization errors
+EPISODE_VERSION = 3
 
 
 @dataclass(frozen=True)
@@ -76,12 +78,12 @@ class EpisodeConfig:
     seed: int = 0
     localization_rate_hz: float = 2.0
     latency: LatencyConfig = field(default_factory=LatencyConfig)
-    # give up after time_limit_factor * (route length / target speed) + 60 s of simulated time
+    # give up after time_limit_factor * (route length / target speed) + 60 s of simulated time;
+    # the time-out is a failure (cause "timeout") and F divides by the route covered until then
     time_limit_factor: float = 3.0
-    # what the speed controller reads: the car's speedometer (as the paper's CARLA controller did;
-    # noise-free) or the EKF's speed (the noisy wheel odometry, which the PID's derivative term
-    # amplifies)
-    speed_source: Literal["speedometer", "ekf"] = "speedometer"
+    # navigate mode: what the speed controller reads, the EKF's speed (the paper's local planner
+    # reads the filtered odometry) or the car's true speed (vlocbench's option)
+    speed_source: Literal["ekf", "speedometer"] = "ekf"
     record_trajectory: bool = True
     controller: ControllerConfig = field(default_factory=ControllerConfig)
     local_planner: LocalPlannerConfig = field(default_factory=LocalPlannerConfig)
@@ -103,6 +105,16 @@ class EpisodeConfig:
             f"must be in (0, 20] Hz, got {self.localization_rate_hz}",
         )
         require(self.time_limit_factor >= 1, "time_limit_factor", "must be >= 1")
+        require(
+            self.mode in ("navigate", "ground_truth"),
+            "mode",
+            f"must be one of navigate, ground_truth; got {self.mode!r}",
+        )
+        require(
+            self.speed_source in ("ekf", "speedometer"),
+            "speed_source",
+            f"must be one of ekf, speedometer; got {self.speed_source!r}",
+        )
 
 
 def plan_town_route(town: Town, spacing_m: float = 2.0) -> WaypointPath:
@@ -117,7 +129,7 @@ class _InFlight:
     due_s: float
     time_s: float
     estimate: PoseEstimate
-    truth: tuple[float, float, float]
+    truth: Array  # (4, 4) world_from_vehicle at the image time
     ekf: tuple[float, float, float]
     latency_s: float
 
@@ -135,17 +147,37 @@ class _Columns:
 
 
 def _record(p: _InFlight, fused: bool | None) -> LocalizationRecord:
-    e, (tx, ty, tyaw) = p.estimate, p.truth
+    e = p.estimate
+    tx, ty, tyaw = planar_of(p.truth)
     if e.success and e.world_from_vehicle is not None:
         x, y, yaw = planar_of(e.world_from_vehicle)
         pos_err = float(np.hypot(x - tx, y - ty))
         yaw_err = float(np.degrees(abs(wrap_angle(yaw - tyaw))))
+        pos_err_3d, rot_err = pose_error(p.truth, e.world_from_vehicle)
     else:
-        x = y = yaw = pos_err = yaw_err = float("nan")
+        x = y = yaw = pos_err = yaw_err = pos_err_3d = rot_err = float("nan")
+    ex, ey, eyaw = p.ekf
     return LocalizationRecord(
-        p.time_s, e.success, x, y, yaw, tx, ty, tyaw, *p.ekf, pos_err, yaw_err,
-        e.compute_time_s, p.latency_s, fused, e.reason,
-    )  # fmt: skip
+        time_s=p.time_s,
+        success=e.success,
+        x_m=x,
+        y_m=y,
+        yaw_rad=yaw,
+        true_x_m=tx,
+        true_y_m=ty,
+        true_yaw_rad=tyaw,
+        ekf_x_m=ex,
+        ekf_y_m=ey,
+        ekf_yaw_rad=eyaw,
+        position_error_m=pos_err,
+        yaw_error_deg=yaw_err,
+        position_error_3d_m=pos_err_3d,
+        rotation_error_deg=rot_err,
+        compute_time_s=e.compute_time_s,
+        latency_s=p.latency_s,
+        fused=fused,
+        reason=e.reason,
+    )
 
 
 class Episode:
@@ -166,7 +198,7 @@ class Episode:
         if localizer is not None:
             localizer.reset(int(seeds[1]))
         self.ekf = Ekf(config.ekf)
-        self.planner = LocalPlanner(path, config.local_planner)
+        self.planner = LocalPlanner(path, config.local_planner, config.controller.target_speed_mps)
         self.controller = VehicleController(config.controller, self.dt_s)
         self.progress = ProgressTracker(path, config.progress)
         self.detector = FailureDetector(config.failure)
@@ -223,7 +255,7 @@ class Episode:
         lat = self.config.latency
         latency = {"none": 0.0, "fixed": lat.fixed_s, "measured": estimate.compute_time_s}[lat.mode]
         due_s = t + latency
-        self.in_flight.append(_InFlight(due_s, t, estimate, planar_of(truth), ekf_pose, latency))
+        self.in_flight.append(_InFlight(due_s, t, estimate, truth, ekf_pose, latency))
         period = 1.0 / self.config.localization_rate_hz
         # the next tick after this one at which the localizer is free again (its answer is out)
         while self.next_query_s <= t + 1e-9 or self.next_query_s < due_s - 1e-9:
@@ -268,7 +300,12 @@ class Episode:
         elif self.lock_lost_since_s is None:
             self.lock_lost_since_s = t
         elif t - self.lock_lost_since_s >= self.config.lock_lost_s - 1e-9:
-            self.ekf.reset(*self._rear(state.x_m, state.y_m, state.yaw_rad), t)
+            self.ekf.reset(
+                *self._rear(state.x_m, state.y_m, state.yaw_rad),
+                t,
+                state.speed_mps,
+                state.yaw_rate_radps,
+            )
             self.lock_losses_s.append(t)
             self.lock_lost_since_s = None
 
@@ -288,8 +325,11 @@ class Episode:
             ekf_pose = self._ekf_pose()
             if c.record_trajectory:
                 self.columns.add(t, state, ekf_pose)
-            x, y, yaw = ekf_pose if navigate else (state.x_m, state.y_m, state.yaw_rad)
-            speed = float(self.ekf.x[3]) if c.speed_source == "ekf" else state.speed_mps
+            if navigate:
+                x, y, yaw = ekf_pose
+                speed = self.ekf.speed_mps if c.speed_source == "ekf" else state.speed_mps
+            else:  # the paper's recall drive: on the true pose and speed
+                x, y, yaw, speed = state.x_m, state.y_m, state.yaw_rad, state.speed_mps
             target = self.planner.step(np.array([x, y]), speed)
             cmd = self.controller.step(x, y, yaw, speed, target.xy, target.remaining_m)
             result = self.sim.step(Control(cmd.throttle, cmd.steer, cmd.brake))
@@ -324,6 +364,9 @@ class Episode:
             mode=c.mode,
             localizer="odometry" if self.localizer is None else self.localizer.name,
             route_length_m=self.path.length_m,
+            route_covered_m=self.path.length_m
+            if self.progress.finished
+            else self.progress.farthest_s_m,
             distance_driven_m=self.distance_m,
             completed=self.progress.finished,
             sim_time_s=t,

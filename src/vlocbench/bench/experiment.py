@@ -235,8 +235,10 @@ def _levels(key: str, value: Any) -> list[Any]:
 
 
 def _label(key: str, value: Any) -> str:
+    """A level's part of a setup's identity: canonical (a grouped level's keys sorted), so the file,
+    the store (which keeps JSON with sorted keys) and the report all name a setup alike."""
     if isinstance(value, dict):
-        return f"{key}(" + ", ".join(f"{k}={v}" for k, v in value.items()) + ")"
+        return f"{key}(" + ", ".join(f"{k}={value[k]}" for k in sorted(value)) + ")"
     if key == "cameras":
         return f"cameras={len(value)}"
     return f"{key}={value}"

@@ -1,7 +1,11 @@
 """Benchmark metrics (pure numerics): recall, failure rate with a bootstrap interval, failure
-fragmentation along the route, tracking error and computation time.
+fragmentation along the route, tracking error, odometry drift and computation time.
 
-The recall thresholds and the failure rate F = (1/N) * sum_i r_i / L_km are the paper's.
+As the paper's code computes them: recall at (0.25 m, 2 deg), (0.5 m, 5 deg) and (5 m, 10 deg)
+with thresholds inclusive, on the 3D position error and the full rotation angle between the true
+and estimated orientation (a planar x, y, yaw recall is kept beside it); the failure rate
+F = (1/N) * sum_i r_i / L_km. Beside recall, the share of answers that are confident and wrong (a
+pose returned, but beyond (5 m, 10 deg)): these, not misses, crash a car.
 """
 
 from __future__ import annotations
@@ -23,6 +27,8 @@ RECALL_THRESHOLDS: tuple[tuple[float, float], ...] = (
     (20.0, 180.0),
 )
 HOTSPOT_BIN_M = 25.0  # failure sites closer than this along the route count as one place
+WRONG_THRESHOLD: tuple[float, float] = (5.0, 10.0)  # a returned pose beyond this is wrong
+DRIFT_MIN_SEGMENT_M = 10.0  # failure-free stretches shorter than this say nothing about drift
 
 
 def recall(
@@ -39,24 +45,89 @@ def recall(
     return tuple(float(np.mean((pos <= m) & (yaw <= d))) for m, d in thresholds)
 
 
+def confident_wrong(
+    position_error_m: NDArray[np.float64],
+    rotation_error_deg: NDArray[np.float64],
+    threshold: tuple[float, float] = WRONG_THRESHOLD,
+) -> float:
+    """Fraction of queries answered with a pose beyond ``threshold`` (NaN errors: no answer, not
+    counted as wrong); NaN when there are no queries."""
+    pos = np.asarray(position_error_m, np.float64)
+    rot = np.abs(np.asarray(rotation_error_deg, np.float64))
+    if len(pos) == 0:
+        return float("nan")
+    answered = np.isfinite(pos) & np.isfinite(rot)
+    wrong = answered & ((pos > threshold[0]) | (rot > threshold[1]))
+    return float(np.mean(wrong))
+
+
+def drift_segments(result: EpisodeResult) -> tuple[tuple[float, float, float], ...]:
+    """The EKF's drift at the end of each failure-free stretch, as the paper measured its
+    odometry's 8.5 % and 0.4 deg/m: (distance driven m, position error m, yaw error deg) per
+    stretch of at least DRIFT_MIN_SEGMENT_M (empty without a recorded trajectory)."""
+    tr = result.trajectory
+    if len(tr.time_s) < 2:
+        return ()
+    ends = [r.time_s for r in result.reinitializations] + [np.inf]
+    out, start = [], -np.inf
+    for end in ends:
+        rows = np.flatnonzero((tr.time_s >= start) & (tr.time_s < end))
+        start = end
+        if len(rows) < 2:
+            continue
+        xy = np.stack([tr.true_x_m[rows], tr.true_y_m[rows]], 1)
+        driven = float(np.sum(np.linalg.norm(np.diff(xy, axis=0), axis=1)))
+        if driven < DRIFT_MIN_SEGMENT_M:
+            continue
+        k = rows[-1]
+        pos = float(np.hypot(tr.ekf_x_m[k] - tr.true_x_m[k], tr.ekf_y_m[k] - tr.true_y_m[k]))
+        yaw = float(np.degrees(abs(wrap_angle(tr.ekf_yaw_rad[k] - tr.true_yaw_rad[k]))))
+        out.append((driven, pos, yaw))
+    return tuple(out)
+
+
+@dataclass(frozen=True)
+class Drift:
+    """Pooled drift of failure-free stretches: mean position error over length (%), mean yaw
+    error per metre, and how many stretches."""
+
+    position_percent: float
+    yaw_deg_per_m: float
+    segments: int
+
+
+def pooled_drift(segments: Sequence[Sequence[float]]) -> Drift:
+    """Mean over stretches of (position error / length) and (yaw error / length)."""
+    a = np.asarray(segments, np.float64).reshape(-1, 3)
+    if len(a) == 0:
+        return Drift(float("nan"), float("nan"), 0)
+    return Drift(
+        float(np.mean(100.0 * a[:, 1] / a[:, 0])), float(np.mean(a[:, 2] / a[:, 0])), len(a)
+    )
+
+
 @dataclass(frozen=True)
 class EpisodeMetrics:
     """Per-episode figures stored with every result (plain numbers and lists: JSON-ready)."""
 
     route_length_m: float
+    route_covered_m: float  # up to the farthest point reached (the whole route if completed)
     distance_driven_m: float
-    completed: bool
+    completed: bool  # False: it ran out of time, which counts as a failure ("timeout")
     failures: int
-    failures_per_km: float
+    failures_per_km: float  # over the route covered
     failure_sites_s_m: tuple[float, ...]  # arc length along the route where each failure happened
     failure_sites_xy: tuple[tuple[float, float], ...]  # where the car truly was, world m
-    failure_causes: tuple[str, ...]
+    failure_causes: tuple[str, ...]  # of every failure, a time-out last
     mean_segment_m: float  # mean length driven between failures (the whole route if none)
     tracking_error_mean_m: float
     final_drift_m: float
+    drift_segments: tuple[tuple[float, float, float], ...]  # see drift_segments()
     queries: int
-    recall: tuple[float, ...]  # raw localization, at RECALL_THRESHOLDS
-    recall_ekf: tuple[float, ...]  # the fused pose at every simulation step
+    recall: tuple[float, ...]  # raw localization, 6-DoF errors, at RECALL_THRESHOLDS
+    recall_planar: tuple[float, ...]  # the same on planar (x, y, yaw) errors
+    confident_wrong: float  # share of queries answered beyond WRONG_THRESHOLD (6-DoF)
+    recall_ekf: tuple[float, ...]  # the fused (planar) pose at every simulation step
     lock_losses_per_km: float  # ground_truth drives: EKF resets at the truth per km of route
     ct_mean_s: float  # mean computation time per query (NaN without queries)
     sim_time_s: float
@@ -68,22 +139,28 @@ def episode_metrics(result: EpisodeResult) -> EpisodeMetrics:
     tr = result.trajectory
     ekf_yaw_err = np.degrees(np.abs(wrap_angle(tr.ekf_yaw_rad - tr.true_yaw_rad)))
     segments = [s.length_m for s in result.segments]
+    pos3d = np.array([x.position_error_3d_m for x in locs])
+    rot = np.array([x.rotation_error_deg for x in locs])
     return EpisodeMetrics(
         route_length_m=result.route_length_m,
+        route_covered_m=result.route_covered_m,
         distance_driven_m=result.distance_driven_m,
         completed=result.completed,
         failures=result.failures,
         failures_per_km=result.failures_per_km,
         failure_sites_s_m=tuple(r.resume_s_m for r in result.reinitializations),
         failure_sites_xy=tuple((r.x_m, r.y_m) for r in result.reinitializations),
-        failure_causes=tuple(r.cause for r in result.reinitializations),
+        failure_causes=result.failure_causes,
         mean_segment_m=float(np.mean(segments)) if segments else result.route_length_m,
         tracking_error_mean_m=result.tracking_error_mean_m,
         final_drift_m=result.final_drift_m,
+        drift_segments=drift_segments(result),
         queries=len(locs),
-        recall=recall(
+        recall=recall(pos3d, rot),
+        recall_planar=recall(
             np.array([x.position_error_m for x in locs]), np.array([x.yaw_error_deg for x in locs])
         ),
+        confident_wrong=confident_wrong(pos3d, rot),
         recall_ekf=recall(tr.ekf_position_error_m, ekf_yaw_err) if len(tr.time_s) else (),
         lock_losses_per_km=len(result.lock_losses_s) / (result.route_length_m / 1000.0),
         ct_mean_s=float(np.mean([x.compute_time_s for x in locs])) if locs else float("nan"),
@@ -114,6 +191,19 @@ def failure_rate(
     means = x[rng.integers(0, len(x), (resamples, len(x)))].mean(axis=1)
     low, high = np.percentile(means, [2.5, 97.5])
     return FailureRate(float(x.mean()), float(low), float(high), len(x))
+
+
+def failure_rate_by_cause(
+    causes: Sequence[Sequence[str]], covered_m: Sequence[float]
+) -> dict[str, float]:
+    """F split by cause over N episodes (each episode's causes and the route it covered): the
+    parts add up to F."""
+    n = len(causes)
+    out: dict[str, float] = {}
+    for episode_causes, covered in zip(causes, covered_m):
+        for cause in episode_causes:
+            out[cause] = out.get(cause, 0.0) + 1.0 / (max(covered, 1.0) / 1000.0) / n
+    return dict(sorted(out.items()))
 
 
 @dataclass(frozen=True)

@@ -9,13 +9,16 @@ import numpy as np
 from vlocbench.geometry import Array
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class LocalizationRecord:
     """One localization call: the image time, the estimate against the truth at that time.
 
-    Errors are NaN when the call failed. ``ekf_*``: the filter's estimate at the image time (before
-    this estimate was fused). ``fused``: True/False once the EKF accepted/rejected it, None when it
-    was never offered (failure, or a re-initialization came first).
+    Errors are NaN when the call failed. ``position_error_m`` / ``yaw_error_deg``: planar (x, y,
+    yaw); ``position_error_3d_m`` / ``rotation_error_deg``: 6-DoF, the 3D distance and the full
+    rotation angle between the true and estimated vehicle (so camera) orientation, as the paper's
+    evaluator measures them. ``ekf_*``: the filter's estimate at the image time (before this
+    estimate was fused). ``fused``: True/False once the EKF accepted/rejected it, None when it was
+    never offered (failure, or a re-initialization came first).
     """
 
     time_s: float
@@ -31,6 +34,8 @@ class LocalizationRecord:
     ekf_yaw_rad: float
     position_error_m: float
     yaw_error_deg: float
+    position_error_3d_m: float
+    rotation_error_deg: float
     compute_time_s: float
     latency_s: float
     fused: bool | None
@@ -86,12 +91,18 @@ class Trajectory:
 
 @dataclass(frozen=True)
 class EpisodeResult:
-    """One drive of a route. Distances in metres, times in seconds (simulated unless ``wall``)."""
+    """One drive of a route. Distances in metres, times in seconds (simulated unless ``wall``).
+
+    An episode that runs out of time has failed once more (cause ``timeout``) and covered only part
+    of the route: its failure rate divides its failures by the route it covered (up to the farthest
+    waypoint reached), never by the whole route.
+    """
 
     config_hash: str
     mode: str
     localizer: str
     route_length_m: float
+    route_covered_m: float  # the route up to the farthest point reached (all of it if completed)
     distance_driven_m: float
     completed: bool  # reached the goal (else it ran out of time)
     sim_time_s: float
@@ -105,13 +116,20 @@ class EpisodeResult:
     trajectory: Trajectory
 
     @property
+    def failure_causes(self) -> tuple[str, ...]:
+        """The cause of each failure, the time-out (if any) last."""
+        causes = tuple(r.cause for r in self.reinitializations)
+        return causes if self.completed else (*causes, "timeout")
+
+    @property
     def failures(self) -> int:
-        return len(self.reinitializations)
+        return len(self.failure_causes)
 
     @property
     def failures_per_km(self) -> float:
-        """r / L_km: this episode's term of the failure rate F."""
-        return self.failures / (self.route_length_m / 1000.0)
+        """r / L_km: this episode's term of the failure rate F (L: the route it covered; at least
+        one metre, so that a car that never got going has a finite, huge rate)."""
+        return self.failures / (max(self.route_covered_m, 1.0) / 1000.0)
 
     @property
     def real_time_factor(self) -> float:

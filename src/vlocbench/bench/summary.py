@@ -16,7 +16,15 @@ from typing import Any
 import numpy as np
 
 from vlocbench.bench.experiment import ExperimentSpec, Setup, load_experiment, setups, sweep_keys
-from vlocbench.bench.metrics import FailureRate, Fragmentation, failure_rate, fragmentation
+from vlocbench.bench.metrics import (
+    Drift,
+    FailureRate,
+    Fragmentation,
+    failure_rate,
+    failure_rate_by_cause,
+    fragmentation,
+    pooled_drift,
+)
 from vlocbench.bench.store import EpisodeRow
 from vlocbench.config import to_dict
 
@@ -29,12 +37,17 @@ class Cell:
     method: str
     setup: str
     failure: FailureRate | None  # None: no failure episodes
-    recall: tuple[float, ...] | None  # raw localization, ground-truth drive
+    failure_by_cause: dict[str, float]  # F split by cause (collision, timeout, ...)
+    timeouts: int  # failure episodes that ran out of time
+    recall: tuple[float, ...] | None  # raw localization, 6-DoF errors, ground-truth drive
+    recall_planar: tuple[float, ...] | None  # the same on planar (x, y, yaw) errors
+    confident_wrong: float  # share of the drive's queries answered beyond (5 m, 10 deg)
     recall_ekf: tuple[float, ...] | None
     lock_losses_per_km: float  # of the EKF in the ground-truth drive (NaN: none, or not recorded)
     ct_s: float  # mean computation time per query (NaN: none)
     fragmentation: Fragmentation | None
     tracking_error_m: float
+    drift: Drift  # the EKF's at the end of failure-free stretches of the failure episodes
     sites_xy: tuple[tuple[float, float], ...]  # failure sites of all repetitions
     errors: int  # episodes that ended in an error (not counted above)
     keys: frozenset[str]  # the episodes behind this cell (a baseline's serve several setups)
@@ -102,15 +115,19 @@ def summarize(spec: ExperimentSpec, rows: Sequence[EpisodeRow]) -> Summary:
         cells[key] = Cell(
             *key,
             failure=failure_rate([m["failures_per_km"] for m in fail]) if fail else None,
+            failure_by_cause=failure_rate_by_cause(
+                [m["failure_causes"] for m in fail], [m["route_covered_m"] for m in fail]
+            ),
+            timeouts=sum(not m["completed"] for m in fail),
             recall=tuple(rec[0]["recall"]) if rec else None,
+            recall_planar=tuple(rec[0]["recall_planar"]) if rec else None,
+            confident_wrong=rec[0]["confident_wrong"] if rec else float("nan"),
             recall_ekf=tuple(rec[0]["recall_ekf"]) if rec else None,
-            # results stored before EPISODE_VERSION 2 have no lock losses
-            lock_losses_per_km=rec[0].get("lock_losses_per_km", float("nan"))
-            if rec
-            else float("nan"),
+            lock_losses_per_km=rec[0]["lock_losses_per_km"] if rec else float("nan"),
             ct_s=_mean([r.metrics["ct_mean_s"] for r in group]),
             fragmentation=fragmentation(sites) if fail else None,
             tracking_error_m=_mean([m["tracking_error_mean_m"] for m in fail]),
+            drift=pooled_drift([seg for m in fail for seg in m["drift_segments"]]),
             sites_xy=tuple(tuple(xy) for m in fail for xy in m["failure_sites_xy"]),
             errors=errors_by.get(key, 0),
             keys=frozenset(r.key for r in group),

@@ -1,13 +1,20 @@
 """PID control of speed and heading, with outputs in the vehicle's control ranges.
 
-Longitudinal: a PID on the speed error in km/h (the paper's gains were tuned in km/h) whose output
-in [-1, 1] becomes throttle (>= 0) or brake (< 0). Lateral: a PID on the heading error (rad) from
-the car to its target waypoint; the output is the normalized steering command (+ = left).
+The defaults are the paper's controller (CARLA's ``VehiclePIDController`` as its code runs it at
+20 Hz): longitudinal, a PID on the speed error in km/h (Kp 0.206, Ki 0.0206, Kd 0.515) whose
+integral is the sum of the errors of all steps (clipped to +-40) and whose derivative is the change
+of the error per step; its output is the throttle in [0, 1], and it never brakes. Lateral, a P
+controller (Kp 0.9) on the heading error (rad) from the car to its target waypoint; the output is
+the normalized steering command (+ = left).
+
+Options (vlocbench's own): gains per second (``time_base="second"``), braking when the output is
+negative (``brake=True``), and slowing down to stop at the goal (``stop_decel_mps2``).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Literal
 
 import numpy as np
 
@@ -20,19 +27,29 @@ MPS_TO_KMH = 3.6
 
 @dataclass(frozen=True)
 class PidGains:
+    """``time_base="step"``: the integral is the sum of the errors and the derivative the change of
+    the error per control step (CARLA's controller, the paper's gains); ``"second"``: the integral
+    of the error over time (error * s) and its rate of change per second."""
+
     kp: float
     ki: float = 0.0
     kd: float = 0.0
-    integral_limit: float = 10.0  # anti-windup bound of the integral term's state (error * s)
+    integral_limit: float = 40.0  # anti-windup bound of the integral's state, in its time base
+    time_base: Literal["step", "second"] = "step"
 
     def __post_init__(self) -> None:
         for name in ("kp", "ki", "kd"):
             require(getattr(self, name) >= 0, f"pid.{name}", "must be >= 0")
         require(self.integral_limit > 0, "pid.integral_limit", "must be > 0")
+        require(
+            self.time_base in ("step", "second"),
+            "pid.time_base",
+            f"must be one of step, second; got {self.time_base!r}",
+        )
 
 
 class Pid:
-    """Discrete PID at a fixed step ``dt_s``; the output is clipped to [``lo``, ``hi``]."""
+    """Discrete PID called every ``dt_s``; the output is clipped to [``lo``, ``hi``]."""
 
     def __init__(self, gains: PidGains, dt_s: float, lo: float = -1.0, hi: float = 1.0) -> None:
         require(dt_s > 0, "dt_s", "must be > 0")
@@ -45,11 +62,12 @@ class Pid:
 
     def step(self, error: float) -> float:
         g = self.gains
+        per = self.dt_s if g.time_base == "second" else 1.0
         self._integral = float(
-            np.clip(self._integral + error * self.dt_s, -g.integral_limit, g.integral_limit)
+            np.clip(self._integral + error * per, -g.integral_limit, g.integral_limit)
         )
         # no derivative kick on the first step after a reset
-        derivative = 0.0 if self._previous is None else (error - self._previous) / self.dt_s
+        derivative = 0.0 if self._previous is None else (error - self._previous) / per
         self._previous = error
         return float(
             np.clip(g.kp * error + g.ki * self._integral + g.kd * derivative, self.lo, self.hi)
@@ -59,22 +77,27 @@ class Pid:
 @dataclass(frozen=True)
 class ControllerConfig:
     target_speed_mps: float = 4.0
-    # the paper's gains (Kp 0.206, Ki 0.0206, Kd 0.515 on km/h) with its Kd read per 20 Hz control
-    # step, i.e. 0.515 * 0.05 s per second: per second, Kd 0.515 makes the loop oscillate
-    longitudinal: PidGains = field(default_factory=lambda: PidGains(0.206, 0.0206, 0.02575))
-    lateral: PidGains = field(default_factory=lambda: PidGains(0.9))
-    max_throttle: float = 0.75
+    # the paper's gains on km/h, per 20 Hz control step
+    longitudinal: PidGains = field(default_factory=lambda: PidGains(0.206, 0.0206, 0.515, 40.0))
+    lateral: PidGains = field(default_factory=lambda: PidGains(0.9, integral_limit=400.0))
+    max_throttle: float = 1.0
+    brake: bool = False  # True: a negative speed-PID output brakes (the paper's only lifts off)
     max_brake: float = 0.5
     max_steer: float = 1.0
-    # slow down to stop at the goal: speed <= sqrt(2 * stop_decel * remaining distance)
-    stop_decel_mps2: float = 1.0
+    # slow down to stop at the goal: speed <= sqrt(2 * stop_decel * remaining distance); null:
+    # drive through at the target speed, as the paper's (an episode ends at the goal)
+    stop_decel_mps2: float | None = None
 
     def __post_init__(self) -> None:
         require(self.target_speed_mps > 0, "controller.target_speed_mps", "must be > 0")
         for name in ("max_throttle", "max_brake", "max_steer"):
             v = getattr(self, name)
             require(0 < v <= 1, f"controller.{name}", f"must be in (0, 1], got {v}")
-        require(self.stop_decel_mps2 > 0, "controller.stop_decel_mps2", "must be > 0")
+        require(
+            self.stop_decel_mps2 is None or self.stop_decel_mps2 > 0,
+            "controller.stop_decel_mps2",
+            "must be > 0 or null",
+        )
 
 
 @dataclass(frozen=True)
@@ -104,6 +127,8 @@ class VehicleController:
 
     def target_speed_mps(self, remaining_m: float) -> float:
         c = self.config
+        if c.stop_decel_mps2 is None:
+            return c.target_speed_mps
         return min(c.target_speed_mps, float(np.sqrt(2 * c.stop_decel_mps2 * max(remaining_m, 0))))
 
     def step(
@@ -120,6 +145,6 @@ class VehicleController:
         error_kmh = (self.target_speed_mps(remaining_m) - speed_mps) * MPS_TO_KMH
         accel = self.speed_pid.step(error_kmh)
         steer = self.heading_pid.step(heading_error_rad(x_m, y_m, yaw_rad, target_xy))
-        if accel >= 0:
-            return ControlCommand(min(accel, c.max_throttle), steer, 0.0)
+        if accel >= 0 or not c.brake:
+            return ControlCommand(min(max(accel, 0.0), c.max_throttle), steer, 0.0)
         return ControlCommand(0.0, steer, min(-accel, c.max_brake))

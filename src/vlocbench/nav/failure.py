@@ -1,4 +1,8 @@
-"""Navigation failure detection: collisions (debounced), getting stuck, leaving the route."""
+"""Navigation failure detection: collisions (debounced), getting stuck, leaving the route.
+
+The paper counts collisions alone (``causes=("collision",)``, the default); getting stuck and
+leaving the route are options. Running out of time (``timeout``) is the episode's to decide.
+"""
 
 from __future__ import annotations
 
@@ -6,12 +10,15 @@ from dataclasses import dataclass
 from typing import Literal
 
 from vlocbench.config import require
+from vlocbench.errors import UnknownNameError
 
-FailureCause = Literal["collision", "stuck", "off_route"]
+FailureCause = Literal["collision", "stuck", "off_route", "timeout"]
+DETECTED_CAUSES: tuple[str, ...] = ("collision", "stuck", "off_route")
 
 
 @dataclass(frozen=True)
 class FailureConfig:
+    causes: tuple[str, ...] = ("collision",)  # which of DETECTED_CAUSES end a segment
     # a collision within this distance and time of the last counted one is the same failure
     collision_debounce_m: float = 5.0
     collision_debounce_s: float = 5.0
@@ -21,6 +28,10 @@ class FailureConfig:
     off_route_s: float = 3.0  # farther than off_route_m from the route for this long
 
     def __post_init__(self) -> None:
+        for cause in self.causes:
+            if cause not in DETECTED_CAUSES:
+                raise UnknownNameError("failure cause", cause, DETECTED_CAUSES)
+        require(len(set(self.causes)) == len(self.causes), "failure.causes", "lists a cause twice")
         for name in ("collision_debounce_m", "collision_debounce_s", "stuck_speed_mps"):
             require(getattr(self, name) >= 0, f"failure.{name}", "must be >= 0")
         for name in ("stuck_s", "off_route_m", "off_route_s"):
@@ -52,8 +63,11 @@ class FailureDetector:
         self._off_since: float | None = None
 
     def collision(self, time_s: float, x_m: float, y_m: float, what: str) -> Failure | None:
-        """A collision started; a failure unless it repeats the last one (debounce)."""
+        """A collision started; a failure unless it repeats the last one (debounce) or collisions
+        are not counted."""
         c, last = self.config, self._last_collision
+        if "collision" not in c.causes:
+            return None
         if (
             last is not None
             and time_s - last.time_s <= c.collision_debounce_s
@@ -70,7 +84,7 @@ class FailureDetector:
         c = self.config
         if speed_mps >= c.stuck_speed_mps:
             self._slow_since = time_s
-        elif time_s - self._slow_since >= c.stuck_s:
+        elif "stuck" in c.causes and time_s - self._slow_since >= c.stuck_s:
             return Failure(
                 time_s, x_m, y_m, "stuck", f"below {c.stuck_speed_mps:g} m/s for {c.stuck_s:g} s"
             )
@@ -78,7 +92,7 @@ class FailureDetector:
             self._off_since = None
         elif self._off_since is None:
             self._off_since = time_s
-        elif time_s - self._off_since >= c.off_route_s:
+        elif "off_route" in c.causes and time_s - self._off_since >= c.off_route_s:
             return Failure(
                 time_s,
                 x_m,
