@@ -23,7 +23,7 @@ def test_drive_prints_failure_rates(capsys, tmp_path):
     config.write_text("mode: ground_truth\nlocalization_rate_hz: 1.0\n")
     assert main(["drive", "town10", "--localizer", "oracle", "--config", str(config)]) == 0
     out = capsys.readouterr().out
-    assert "town10: route 510 m; oracle, ground_truth" in out
+    assert "town10: route 489 m; oracle, ground_truth" in out
     assert "seed 0: 0 failures (0.0/km)" in out and "done" in out
     assert "failure rate F = 0.0 per km over 1 episodes" in out
 

@@ -169,7 +169,9 @@ def test_cli_run_and_report_errors(tiny, tmp_path, capsys):
     bad.write_text(yaml.safe_dump({"towns": ["town10"], "methods": ["sift-vlad"],
                                    "sweep": {"weather.fogg": [10]}}))  # fmt: skip
     assert main(["run", str(bad)]) == 2
-    assert "valid: fog_visual_range_m, overcast, rain, wetness" in capsys.readouterr().err
+    assert "valid: fog_model, fog_ramp_m, fog_visual_range_m, overcast, rain, wetness" in (
+        capsys.readouterr().err
+    )
     other = tmp_path / "other.yaml"
     other.write_text(yaml.safe_dump({"towns": ["town10"], "baseline": True, "recall": False,
                                      "failure": False, "output": str(root / "out")}))  # fmt: skip

@@ -16,6 +16,10 @@ def test_bad_values_name_their_field():
         Illumination(k=-1)
     with pytest.raises(ConfigError, match=r"fog_visual_range_m"):
         Weather(fog_visual_range_m=-5)
+    with pytest.raises(
+        ConfigError, match="unknown fog_model 'linear'; valid: exponential, starts_at"
+    ):
+        from_dict(Weather, {"fog_model": "linear"})
     with pytest.raises(ConfigError, match=r"fov_deg"):
         Intrinsics(fov_deg=180)
     with pytest.raises(ConfigError, match=r"fov_deg"):

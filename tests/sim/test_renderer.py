@@ -74,13 +74,34 @@ def test_auto_exposure_brightens_dusk_with_noise(small_sim):
     assert day.tobytes() == render(small_sim, Conditions()).image.tobytes()
 
 
-def test_contrast_falls_with_fog(small_sim):
+def test_contrast_falls_with_exponential_fog(small_sim):
     front = Camera("front", SMALL, Extrinsics(z_m=1.6, yaw_deg=0.0))
     stds = [
-        gray(render(small_sim, Conditions(weather=Weather(fog_visual_range_m=v)), front)).std()
+        gray(
+            render(
+                small_sim,
+                Conditions(weather=Weather(fog_visual_range_m=v, fog_model="exponential")),
+                front,
+            )
+        ).std()
         for v in (None, 60.0, 10.0)
     ]
     assert stds[0] > stds[1] > stds[2], stds
+
+
+def test_paper_fog_starts_at_the_visual_range(small_sim):
+    """CARLA's fog as the paper set it: clear before the visual range, opaque soon after; the
+    exponential option fogs the road just in front of the camera too."""
+    front = Camera("front", SMALL, Extrinsics(z_m=1.6, yaw_deg=0.0))
+    clear = gray(render(small_sim, Conditions(), front))
+    starts = gray(render(small_sim, Conditions(weather=Weather(fog_visual_range_m=10.0)), front))
+    exp = Weather(fog_visual_range_m=10.0, fog_model="exponential")
+    exponential = gray(render(small_sim, Conditions(weather=exp), front))
+    near = slice(-20, None)  # the road 2-3 m ahead
+    assert np.abs(starts[near] - clear[near]).mean() < 1.0
+    assert np.abs(exponential[near] - clear[near]).mean() > 10.0
+    far = (slice(95, 118), slice(0, 150))  # the far end of the street, beyond 15 m
+    assert clear[far].std() > 10.0 and starts[far].std() < 2.0  # uniform fog
 
 
 def test_winter_differs_from_summer(small_sim):

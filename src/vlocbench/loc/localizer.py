@@ -32,12 +32,16 @@ from vlocbench.loc.registry import (
 )
 from vlocbench.loc.retrieval import nearest_poses, top_k
 
+MIN_PNP_POINTS = 4  # P3P's minimal sample and one point to choose among its solutions
+
 
 @dataclass(frozen=True)
 class LocalizerConfig:
     top_k: int = 5
     ransac_max_error_px: float = 12.0
-    min_inliers: int = 12
+    # 0: every pose PnP returns is an answer, as hloc's and the paper's localizer publish it;
+    # > 0 (vlocbench's option, 12 before): fewer inliers is a failure
+    min_inliers: int = 0
     ransac_seed: int = 0  # RANSAC is seeded: the same query gives the same pose
     prior_max_angle_deg: float = 60.0  # pose-prior retrieval: gallery views within this angle
     fallback_to_retrieval: bool = False  # on failure, answer the best retrieved image's pose
@@ -49,8 +53,17 @@ class LocalizerConfig:
     def __post_init__(self) -> None:
         require(self.top_k >= 1, "localizer.top_k", "must be >= 1")
         require(self.ransac_max_error_px > 0, "localizer.ransac_max_error_px", "must be > 0")
-        require(self.min_inliers >= 4, "localizer.min_inliers", "must be >= 4")
+        require(
+            self.min_inliers == 0 or self.min_inliers >= MIN_PNP_POINTS,
+            "localizer.min_inliers",
+            f"must be 0 (any PnP answer) or >= {MIN_PNP_POINTS}",
+        )
         require(self.confident_inliers >= 0, "localizer.confident_inliers", "must be >= 0")
+
+    @property
+    def min_points(self) -> int:
+        """Correspondences needed to try PnP at all."""
+        return max(self.min_inliers, MIN_PNP_POINTS)
 
 
 @dataclass(frozen=True)
@@ -210,7 +223,7 @@ class MapLocalizer:
         retrieved = self._retrieve(image, feats, prior_world_from_cam)
         seconds["retrieval"] = time.perf_counter() - t
         names = tuple(self.images[i].name for i in retrieved)
-        if len(feats) < c.min_inliers:
+        if len(feats) < c.min_points:
             reason = f"only {len(feats)} features in the image"
             return self._failed(retrieved, seconds, reason), None
         best: tuple[int, dict | None, list[int], _Correspondences | None] = (0, None, [], None)
@@ -232,7 +245,7 @@ class MapLocalizer:
                 if not progressive and n < len(cluster) - 1:
                     continue
                 q = np.concatenate(q_idx)
-                if len(q) < c.min_inliers:
+                if len(q) < c.min_points:
                     continue
                 t = time.perf_counter()
                 corr = _Correspondences(
@@ -251,7 +264,11 @@ class MapLocalizer:
         inliers, answer, cluster, corr = best
         n_corr = 0 if corr is None else len(corr.points2D)
         if answer is None or inliers < c.min_inliers:
-            reason = f"PnP found {inliers} inliers (< {c.min_inliers})"
+            reason = (
+                f"PnP found {inliers} inliers (< {c.min_inliers})"
+                if answer is not None
+                else f"PnP found no pose from {n_corr} correspondences"
+            )
             return self._failed(retrieved, seconds, reason, n_corr), corr
         cam_from_world = np.vstack([answer["cam_from_world"].matrix(), [0, 0, 0, 1]])
         return QueryResult(

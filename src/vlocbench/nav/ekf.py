@@ -1,15 +1,17 @@
 """Planar EKF fusing wheel odometry with (late) absolute pose measurements.
 
-State (5,): x m, y m, yaw rad, v m/s, w rad/s. The defaults are the paper's filter
+State (6,): x m, y m, yaw rad, v m/s, w rad/s, a m/s^2. The defaults are the paper's filter
 (robot_localization's ``ekf_node`` in 2D mode, as configured in its code):
 
-- ``odometry_fusion="twist"``: the velocities are states with a constant-velocity motion model,
-  and each odometry reading is a twist measurement of (v, w) with the covariance the paper's
-  wheel-odometry node publishes (its noise model's sigmas at 4 m/s, 0.16 and 0.24, written into the
-  variance slots). ``"input"`` (vlocbench's own): the readings drive the prediction as a control
-  input and their noise enters through the input Jacobian.
-- process noise per second x, y 0.05, yaw 0.06, v 0.025, w 0.02 (robot_localization scales its
-  matrix by the time step); initial covariance 1e-9; pose measurements with covariance 0.1.
+- ``odometry_fusion="twist"``: speed, yaw rate and acceleration are states (robot_localization's
+  motion model: constant acceleration along the heading, constant yaw rate), and each odometry
+  reading is a twist measurement of (v, w) with the covariance the paper's wheel-odometry node
+  publishes (its noise model's sigmas at 4 m/s, 0.16 and 0.24, written into the variance slots).
+  ``"input"`` (vlocbench's own): the readings drive the prediction as a control input and their
+  noise enters through the input Jacobian (the acceleration state stays 0).
+- process noise per second x, y 0.05, yaw 0.06, v 0.025, w 0.02, a 0.01 (robot_localization
+  scales its matrix by the time step); initial covariance 1e-9; pose measurements with covariance
+  0.1. The filter's lateral velocity is left out: it tracks the rear axle, which has none.
 - gating by Mahalanobis distance 20 alone (the paper's text says "20 m"; its code sets
   ``pose0_rejection_threshold: 20``). ``metric_gate_m`` adds a gate in metres.
 - ``late_measurements="current"``: ``smooth_lagged_data`` off, so a pose stamped in the past
@@ -29,11 +31,12 @@ import numpy as np
 
 from vlocbench.config import require
 from vlocbench.geometry import wrap_angle
-from vlocbench.nav.odometry import OdometryReading, integrate_planar
+from vlocbench.nav.odometry import OdometryReading
 from vlocbench.nav.path import Array
 
-_H_POSE = np.eye(3, 5)
-_H_TWIST = np.eye(5)[3:]
+_N = 6  # x, y, yaw, v, w, a
+_H_POSE = np.eye(3, _N)
+_H_TWIST = np.eye(_N)[3:5]
 _KNOWN_VAR = 1e-9  # variance of v and w at a (re)start: the car's motion is known
 
 OdometryFusion = Literal["twist", "input"]
@@ -52,6 +55,7 @@ class EkfConfig:
     process_yaw_var_rad2ps: float = 0.06
     process_speed_var_m2ps3: float = 0.025  # twist fusion: how fast v may change, (m/s)^2 per s
     process_yaw_rate_var_rad2ps3: float = 0.02
+    process_accel_var_m2ps5: float = 0.01
     # twist fusion: the variance of a reading's speed and yaw rate; null: each reading's own
     # (the noise model's at its speed) instead of the paper's fixed values
     twist_speed_var_m2ps2: float | None = 0.16
@@ -78,6 +82,7 @@ class EkfConfig:
             "process_yaw_var_rad2ps",
             "process_speed_var_m2ps3",
             "process_yaw_rate_var_rad2ps3",
+            "process_accel_var_m2ps5",
             "initial_position_var_m2",
             "initial_yaw_var_rad2",
         ):
@@ -157,9 +162,9 @@ class Ekf:
         """Start over at a known pose and motion (at rest by default: a start or a
         re-initialization)."""
         c = self.config
-        self.x = np.array([x_m, y_m, yaw_rad, speed_mps, yaw_rate_radps])
+        self.x = np.array([x_m, y_m, yaw_rad, speed_mps, yaw_rate_radps, 0.0])
         self.P = np.diag(
-            [c.initial_position_var_m2] * 2 + [c.initial_yaw_var_rad2] + [_KNOWN_VAR] * 2
+            [c.initial_position_var_m2] * 2 + [c.initial_yaw_var_rad2] + [_KNOWN_VAR] * 3
         )
         self.time_s = time_s
         # late_measurements="replay": (event, state before it, covariance before it), in time order
@@ -175,47 +180,51 @@ class Ekf:
         """The filter's speed: filtered (twist fusion) or the last reading (input)."""
         return float(self.x[3])
 
-    def _motion(self, v: float, w: float, dt_s: float) -> tuple[Array, Array]:
-        """Unicycle motion of the pose at (v, w) over ``dt_s``: the new pose (3,) and the Jacobian
-        (3, 5) of the pose with respect to (x, y, yaw, v, w)."""
+    def _motion(self, v: float, w: float, a: float, dt_s: float) -> tuple[Array, Array]:
+        """Motion of the pose at speed v, yaw rate w and acceleration a over ``dt_s``, along the
+        mid-step heading: the new pose (3,) and its Jacobian (3, 6) with respect to the state."""
         x, y, yaw = self.x[:3]
         heading = yaw + 0.5 * w * dt_s
         c, s = np.cos(heading), np.sin(heading)
+        d = v * dt_s + 0.5 * a * dt_s**2  # distance travelled
         J = np.array(
             [
-                [1, 0, -v * s * dt_s, c * dt_s, -0.5 * v * s * dt_s**2],
-                [0, 1, v * c * dt_s, s * dt_s, 0.5 * v * c * dt_s**2],
-                [0, 0, 1, 0, dt_s],
+                [1, 0, -d * s, c * dt_s, -0.5 * d * s * dt_s, 0.5 * c * dt_s**2],
+                [0, 1, d * c, s * dt_s, 0.5 * d * c * dt_s, 0.5 * s * dt_s**2],
+                [0, 0, 1, 0, dt_s, 0],
             ]
         )
-        return np.array(integrate_planar(x, y, yaw, v, w, dt_s)), J
+        pose = (x + d * c, y + d * s, float(wrap_angle(yaw + w * dt_s)))
+        return np.array(pose), J
 
     def _process_noise(self, dt_s: float) -> Array:
         c = self.config
         q = [c.process_position_var_m2ps] * 2 + [c.process_yaw_var_rad2ps]
-        q += [c.process_speed_var_m2ps3, c.process_yaw_rate_var_rad2ps3]
+        q += [c.process_speed_var_m2ps3, c.process_yaw_rate_var_rad2ps3, c.process_accel_var_m2ps5]
         return np.diag(q) * dt_s
 
     def _predict_input(self, odometry: OdometryReading, dt_s: float) -> None:
         v, w = odometry.speed_mps, odometry.yaw_rate_radps
-        pose, J = self._motion(v, w, dt_s)
-        F = np.zeros((5, 5))  # velocities are replaced by the readings: zero rows/columns
+        pose, J = self._motion(v, w, 0.0, dt_s)
+        F = np.zeros((_N, _N))  # velocities are replaced by the readings: zero rows/columns
         F[:3, :3] = J[:, :3]
-        G = np.zeros((5, 2))  # d state / d (v, w)
-        G[:3] = J[:, 3:]
-        G[3:] = np.eye(2)
+        G = np.zeros((_N, 2))  # d state / d (v, w)
+        G[:3] = J[:, 3:5]
+        G[3:5] = np.eye(2)
         U = np.diag([odometry.speed_var, odometry.yaw_rate_var])
         Q = self._process_noise(dt_s)
         Q[3:, 3:] = 0.0
-        self.x = np.array([*pose, v, w])
+        self.x = np.array([*pose, v, w, 0.0])
         self.P = F @ self.P @ F.T + G @ U @ G.T + Q
 
     def _predict_twist(self, odometry: OdometryReading, dt_s: float) -> None:
         c = self.config
-        pose, J = self._motion(float(self.x[3]), float(self.x[4]), dt_s)
-        F = np.eye(5)
+        v, w, a = (float(value) for value in self.x[3:])
+        pose, J = self._motion(v, w, a, dt_s)
+        F = np.eye(_N)
         F[:3] = J
-        self.x = np.array([*pose, self.x[3], self.x[4]])
+        F[3, 5] = dt_s
+        self.x = np.array([*pose, v + a * dt_s, w, a])
         self.P = F @ self.P @ F.T + self._process_noise(dt_s)
         # then the reading, a measurement of (v, w) at the end of the step
         R = np.diag(
@@ -227,7 +236,7 @@ class Ekf:
             ]
         )
         R = np.maximum(R, np.eye(2) * 1e-9)  # a reading at rest has no speed noise
-        r = np.array([odometry.speed_mps, odometry.yaw_rate_radps]) - self.x[3:]
+        r = np.array([odometry.speed_mps, odometry.yaw_rate_radps]) - self.x[3:5]
         self._correct(_H_TWIST, r, R)
 
     def _correct(self, H: Array, r: Array, R: Array, S_inv: Array | None = None) -> None:
@@ -236,7 +245,7 @@ class Ekf:
         K = self.P @ H.T @ S_inv
         self.x = self.x + K @ r
         self.x[2] = wrap_angle(self.x[2])
-        A = np.eye(5) - K @ H  # Joseph form keeps P symmetric positive definite
+        A = np.eye(_N) - K @ H  # Joseph form keeps P symmetric positive definite
         self.P = A @ self.P @ A.T + K @ R @ K.T
 
     def _update(self, m: PoseMeasurement) -> UpdateOutcome:

@@ -46,16 +46,29 @@ class Illumination:
         return self.sun_elevation_base_rad * 0.5**self.k
 
 
+FogModel = Literal["starts_at", "exponential"]
+
+
 @dataclass(frozen=True)
 class Weather:
-    """Fog by visual range (5 % contrast left at that distance), rain and overcast in [0, 1]."""
+    """Fog by visual range, rain and overcast in [0, 1].
+
+    ``fog_model="starts_at"`` (the paper's: CARLA with ``fog_distance`` = v and density 100): the
+    air is clear up to the visual range v and the fog closes in over ``fog_ramp_m`` beyond it.
+    ``"exponential"`` (vlocbench's option): fog from the camera on, 5 % contrast left at v.
+    """
 
     fog_visual_range_m: float | None = None
     rain: float = 0.0
     overcast: float = 0.0
     wetness: float | None = None  # wet look of the ground; defaults to ``rain``
+    fog_model: FogModel = "starts_at"
+    fog_ramp_m: float = 5.0  # starts_at: from clear at v to opaque at v + fog_ramp_m
 
     def __post_init__(self) -> None:
+        if self.fog_model not in ("starts_at", "exponential"):
+            raise UnknownNameError("fog model", self.fog_model, ("starts_at", "exponential"))
+        require(self.fog_ramp_m > 0, "weather.fog_ramp_m", "must be > 0 m")
         if self.fog_visual_range_m is not None:
             require(
                 self.fog_visual_range_m > 0,
@@ -70,7 +83,7 @@ class Weather:
 
     @property
     def fog_density_per_m(self) -> float:
-        """Exponential fog density: exp(-d * v) = 0.05 at the visual range v."""
+        """``exponential``: the fog density, exp(-d * v) = 0.05 at the visual range v."""
         return 0.0 if self.fog_visual_range_m is None else 3.0 / self.fog_visual_range_m
 
     @property

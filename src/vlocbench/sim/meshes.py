@@ -238,4 +238,5 @@ def platform_mesh(
             length,
             height,
             uv_per_m=(1.0, 1.0),
+            cell_m=cell_m,  # fog and lighting are computed per vertex
         )

@@ -46,7 +46,12 @@ def sky_colors(c: Conditions) -> tuple[NDArray, NDArray, float]:
     horizon = horizon * (1 - w.overcast) + grey * 1.05 * w.overcast
     if w.fog_visual_range_m is not None:
         fog = fog_color(c)
-        mix = float(np.clip(60.0 / w.fog_visual_range_m, 0.5, 1.0))
+        # the sky lies beyond any fog that starts at a distance; exponential fog leaves some blue
+        mix = (
+            1.0
+            if w.fog_model == "starts_at"
+            else float(np.clip(60.0 / w.fog_visual_range_m, 0.5, 1.0))
+        )
         return zenith * brightness * (1 - mix) + fog * mix, fog, brightness
     return zenith * brightness, horizon * brightness, brightness
 
@@ -159,8 +164,13 @@ class Renderer:
         # Under fog it draws no skybox but clears to the context's fog colour: set that too.
         r._mjr_context.fogRGBA[:] = [*fog_color(self.conditions), 1.0]
         r._gl_context.make_current()
-        GL.glFogi(GL.GL_FOG_MODE, GL.GL_EXP)
-        GL.glFogf(GL.GL_FOG_DENSITY, w.fog_density_per_m)
+        if w.fog_model == "starts_at":
+            GL.glFogi(GL.GL_FOG_MODE, GL.GL_LINEAR)
+            GL.glFogf(GL.GL_FOG_START, w.fog_visual_range_m)
+            GL.glFogf(GL.GL_FOG_END, w.fog_visual_range_m + w.fog_ramp_m)
+        else:
+            GL.glFogi(GL.GL_FOG_MODE, GL.GL_EXP)
+            GL.glFogf(GL.GL_FOG_DENSITY, w.fog_density_per_m)
         GL.glFogfv(GL.GL_FOG_COLOR, [*fog_color(self.conditions), 1.0])
 
     def render(

@@ -1,7 +1,9 @@
 """Road network of a grid town: intersections, right-hand lanes, turn connectors, routes.
 
-Pure numerics. Roads run along the grid lines ``x = xs[i]`` and ``y = ys[j]``; every road has one
-lane per direction (right-hand traffic). Around each intersection centre lies a square zone of
+Pure numerics. Roads run along the grid lines ``x = xs[i]`` and ``y = ys[j]``; every road has
+``lanes_per_direction`` lanes each way (right-hand traffic), and the lane graph follows the lane next
+to the centre line (on a wide road the car has the outer lanes to its right before the curb, as on
+CARLA Town10's avenues). Around each intersection centre lies a square zone of
 half-size ``zone_m = half road width + corner radius``; inside it lanes are joined by connectors
 (straight, or quarter arcs of radius ``zone_m - lane_offset`` for right turns and
 ``zone_m + lane_offset`` for left turns). Lane polylines are sampled every ``spacing_m`` (2 m).
@@ -46,13 +48,15 @@ class RoadLayout:
     ys: Array
     lane_width_m: float
     corner_radius_m: float
+    lanes_per_direction: int = 1
 
     @property
     def half_width_m(self) -> float:
-        return self.lane_width_m  # two lanes: half the road is one lane
+        return self.lanes_per_direction * self.lane_width_m
 
     @property
     def lane_offset_m(self) -> float:
+        """From the centre line to the middle of the driven lane (the innermost one)."""
         return 0.5 * self.lane_width_m
 
     @property

@@ -27,7 +27,7 @@ Array = NDArray[np.float64]
 GROUP_STATIC, GROUP_FOLIAGE_FULL, GROUP_FOLIAGE_SPARSE = 0, 1, 2
 GROUP_TRAFFIC, GROUP_COLLISION, GROUP_EGO = 3, 4, 5
 # bump when the look of the towns changes: galleries and maps (and results) are keyed by it
-SCENE_VERSION = 3
+SCENE_VERSION = 4
 GROUND_FLOOR_M = 4.2
 SHOP_ATLAS_COLUMNS = 8
 SKY_SIZE = 64
@@ -141,7 +141,7 @@ class _SceneBuilder:
         self.shop_rows = -(-len(shops) // self.shop_columns)
         self.texture("shops", tex.atlas([t.image for t in shops], self.shop_columns))
         self.material("shops", "shops", specular=0.2)
-        road = tex.road_tile(spec.road.lane_width_m, 12.0, rng)
+        road = tex.road_tile(spec.road.lane_width_m, 12.0, rng, spec.road.lanes_per_direction)
         self.texture("road", road)
         self.texture("road_winter", tex.snowy_road(road, rng))
         asphalt = tex._finish(tex.asphalt(256, rng), rng, 4)

@@ -249,12 +249,15 @@ def asphalt(size: int, rng: np.random.Generator, base: float = 85.0) -> NDArray:
     return img
 
 
-def road_tile(lane_width_m: float, length_m: float, rng: np.random.Generator) -> Image:
-    """Road texture across both lanes (u: across, 0 = right curb) and ``length_m`` along (v)."""
+def road_tile(
+    lane_width_m: float, length_m: float, rng: np.random.Generator, lanes_per_direction: int = 1
+) -> Image:
+    """Road texture across all lanes (u: across, 0 = right curb) and ``length_m`` along (v): a
+    dashed yellow centre line, dashed white lines between lanes of one direction, white edges."""
     px = 24  # texels per metre
-    w, h = round(2 * lane_width_m * px), round(length_m * px)
+    w, h = round(2 * lanes_per_direction * lane_width_m * px), round(length_m * px)
     img = asphalt(max(w, h), rng)[:h, :w]
-    for _ in range(6):  # patches and cracks
+    for _ in range(6 * lanes_per_direction):  # patches and cracks
         x, y = int(rng.integers(0, w)), int(rng.integers(0, h))
         cv2.ellipse(img, (x, y), (int(rng.integers(8, 40)), int(rng.integers(8, 60))), 0, 0, 360,
                     _rgb((70, 70, 72)), -1)  # fmt: skip
@@ -262,6 +265,9 @@ def road_tile(lane_width_m: float, length_m: float, rng: np.random.Generator) ->
     dash = round(3 * px)
     for y in range(0, h, round(length_m * px / 2)):
         cv2.rectangle(img, (cx - 3, y), (cx + 3, y + dash), (225, 215, 170), -1)
+        for k in range(1, lanes_per_direction):
+            for x in (cx - round(k * lane_width_m * px), cx + round(k * lane_width_m * px)):
+                cv2.rectangle(img, (x - 2, y), (x + 2, y + dash), (220, 220, 215), -1)
     edge = round(0.35 * px)
     cv2.rectangle(img, (edge, 0), (edge + 4, h), (220, 220, 215), -1)
     cv2.rectangle(img, (w - edge - 4, 0), (w - edge, h), (220, 220, 215), -1)

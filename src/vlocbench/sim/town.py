@@ -30,12 +30,14 @@ Side = Literal["none", "south", "north", "west", "east"]
 @dataclass(frozen=True)
 class RoadSpec:
     lane_width_m: float = 4.0
+    lanes_per_direction: int = 1  # the route keeps to the lane next to the centre line
     sidewalk_width_m: float = 3.0
     curb_height_m: float = 0.15
     corner_radius_m: float = 6.0
 
     def __post_init__(self) -> None:
         require(2.5 <= self.lane_width_m <= 6.0, "road.lane_width_m", "must be in [2.5, 6] m")
+        require(1 <= self.lanes_per_direction <= 3, "road.lanes_per_direction", "must be 1, 2 or 3")
         require(1.0 <= self.sidewalk_width_m <= 10.0, "road.sidewalk_width_m", "must be in [1, 10]")
         require(0.0 < self.curb_height_m <= 0.4, "road.curb_height_m", "must be in (0, 0.4] m")
         require(3.0 <= self.corner_radius_m <= 20.0, "road.corner_radius_m", "must be in [3, 20]")
@@ -122,7 +124,8 @@ class TownSpec:
         require(bool(self.name), "name", "must not be empty")
         require(len(self.block_widths_m) >= 1, "block_widths_m", "needs at least one block")
         require(len(self.block_depths_m) >= 1, "block_depths_m", "needs at least one block")
-        min_block = 2 * (self.road.lane_width_m + self.road.corner_radius_m) + 10
+        half_road_m = self.road.lanes_per_direction * self.road.lane_width_m
+        min_block = 2 * (half_road_m + self.road.corner_radius_m) + 10
         for name in ("block_widths_m", "block_depths_m"):
             for k, w in enumerate(getattr(self, name)):
                 require(w >= min_block, f"{name}[{k}]", f"must be >= {min_block:g} m, got {w:g}")
@@ -236,7 +239,10 @@ class _Builder:
         self.rng = np.random.default_rng(spec.seed)
         xs = np.concatenate([[0.0], np.cumsum(spec.block_widths_m)])
         ys = np.concatenate([[0.0], np.cumsum(spec.block_depths_m)])
-        self.layout = RoadLayout(xs, ys, spec.road.lane_width_m, spec.road.corner_radius_m)
+        road = spec.road
+        self.layout = RoadLayout(
+            xs, ys, road.lane_width_m, road.corner_radius_m, road.lanes_per_direction
+        )
         self.hw = self.layout.half_width_m
         self.sw = spec.road.sidewalk_width_m
         self.platforms: list[Platform] = []
