@@ -111,10 +111,19 @@ def test_bad_experiments_are_clear_errors(tmp_path):
 def test_shipped_experiments_load():
     from pathlib import Path
 
-    files = sorted(Path(__file__).parents[2].joinpath("experiments").glob("*.yaml"))
+    root = Path(__file__).parents[2].joinpath("experiments")
+    files = sorted(root.glob("*.yaml"))
     names = {f.stem for f in files}
-    assert {"smoke", "demo", "illumination", "viewpoint", "weather", "season", "intrinsics",
-            "extrinsics", "multi_camera", "traffic", "headlights"} <= names  # fmt: skip
+    assert {"smoke", "demo", "season", "intrinsics", "extrinsics", "multi_camera", "traffic",
+            "headlights"} <= names  # fmt: skip
     for f in files:
         spec = load_experiment(f)
         assert spec.name == f.stem and setups(spec)
+    # the paper's three at its scale (the reduced illumination run shares the full one's store)
+    paper = {f.stem: load_experiment(f) for f in sorted(root.joinpath("paper").glob("*.yaml"))}
+    assert set(paper) == {"illumination", "illumination_reduced", "viewpoint", "weather"}
+    assert len(setups(paper["illumination"])) == 11 and paper["illumination"].repetitions == 5
+    assert len(setups(paper["viewpoint"])) == 13 and len(setups(paper["weather"])) == 4
+    full, reduced = paper["illumination"], paper["illumination_reduced"]
+    assert (reduced.name, reduced.output) == (full.name, full.output)
+    assert {s.label for s in setups(reduced)} < {s.label for s in setups(full)}

@@ -25,6 +25,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
+from vlocbench.bench.paper import FACTOR_OF_AXIS, PaperTable, paper_results, shape
 from vlocbench.bench.store import read_latest_run
 from vlocbench.bench.summary import BASELINE, Summary, spec_from_stored, summarize
 
@@ -176,6 +177,107 @@ def fragmentation_table(summary: Summary, town: str) -> Table:
     return header, rows
 
 
+# -- beside the paper ------------------------------------------------------------------------------
+def _paper_level(factor: str, value: Any) -> Any:
+    """A setup's level in the key of the paper's table (k; (z, pitch); fog visual range)."""
+    if factor == "viewpoint" and isinstance(value, dict):
+        return (float(value.get("dz_m", 0.0)), float(value.get("pitch_down_deg", 0.0)))
+    if factor == "weather" and isinstance(value, dict):
+        value = value.get("fog_visual_range_m")
+    return None if value is None else float(value)
+
+
+def _paper_table(summary: Summary) -> PaperTable | None:
+    if len(summary.axis) != 1:
+        return None
+    key = summary.axis[0]
+    factor = FACTOR_OF_AXIS.get(key) or FACTOR_OF_AXIS.get(key.split(".")[0])
+    return None if factor is None else paper_results().tables[factor]
+
+
+def _ours(summary: Summary, town: str, method: str) -> tuple[list[float], list[float]]:
+    """F and T1 recall (%) of a method per setup, NaN where missing."""
+    f, t1 = [], []
+    for s in summary.setups:
+        c = summary.cell(town, method, s.label)
+        f.append(c.failure.mean if c is not None and c.failure is not None else float("nan"))
+        t1.append(100 * c.recall[0] if c is not None and c.recall else float("nan"))
+    return f, t1
+
+
+def paper_comparison_tables(summary: Summary) -> list[tuple[str, Table]]:
+    """Our failure rates and recall beside the paper's, level by level where the levels match,
+    and the shape measures of :mod:`vlocbench.bench.paper` for every method of both."""
+    table = _paper_table(summary)
+    if table is None:
+        return []
+    paper = paper_results()
+    out = []
+    ours_levels = [_paper_level(table.factor, s.levels[0][1]) for s in summary.setups]
+    for town in summary.towns:
+        name = summary.town_names[town]
+        if name not in table.failure_rate:
+            continue
+        odo_cell = next(
+            (c for s in summary.setups if (c := summary.cell(town, BASELINE, s.label))), None
+        )
+        odo = odo_cell.failure.mean if odo_cell and odo_cell.failure else float("nan")
+        paper_odo = paper.odometry_failure_rate[name]
+        shared = [lv for lv in table.levels if lv in ours_levels]
+        header = ["source", "method", *(_level_text(lv) for lv in shared)]
+        rows = []
+        for method in summary.methods:
+            f, _ = _ours(summary, town, method)
+            label = "odometry only" if method == BASELINE else method
+            rows.append(["vlocbench", label, *(_fmt(f[ours_levels.index(lv)]) for lv in shared)])
+        for method, f in table.failure_rate[name].items():
+            rows.append(["paper", method, *(_fmt(f[table.levels.index(lv)]) for lv in shared)])
+        rows.append(["paper", "odometry only", *(_fmt(paper_odo) for _ in shared)])
+        out.append((f"{name}: failure rate F (failures/km) beside the paper's ({paper.citation})",
+                    (header, rows)))  # fmt: skip
+        if table.recall_t1:
+            shared_r = [lv for lv in table.recall_levels if lv in ours_levels]
+            header = ["source", "method", *(_level_text(lv) for lv in shared_r)]
+            rows = []
+            for method in (m for m in summary.methods if m != BASELINE):
+                _, t1 = _ours(summary, town, method)
+                rows.append(["vlocbench", method,
+                             *(_fmt(t1[ours_levels.index(lv)]) for lv in shared_r)])  # fmt: skip
+            for method, t1 in table.recall_t1[name].items():
+                rows.append(["paper", method,
+                             *(_fmt(t1[table.recall_levels.index(lv)]) for lv in shared_r)])  # fmt: skip
+            out.append((f"{name}: T1 recall (%, 6-DoF, ground-truth drive) beside the paper's",
+                        (header, rows)))  # fmt: skip
+        header = ["source", "method", "F easiest", "Spearman(F, level)", "F reaches odometry at",
+                  "F above odometry up to T1 (%)"]  # fmt: skip
+        rows = []
+        for method in (m for m in summary.methods if m != BASELINE):
+            f, t1 = _ours(summary, town, method)
+            rows.append(["vlocbench", method, *_shape_cells(shape(f, odo, None, t1), ours_levels)])
+        for method, f in table.failure_rate[name].items():
+            t1_by_level = dict(
+                zip(table.recall_levels, table.recall_t1.get(name, {}).get(method, ()))
+            )
+            t1 = [t1_by_level.get(lv, float("nan")) for lv in table.levels]
+            rows.append(["paper", method,
+                         *_shape_cells(shape(f, paper_odo, None, t1), list(table.levels))])  # fmt: skip
+        out.append((f"{name}: shape of F over the levels, ours (odometry only {_fmt(odo)}/km) and "
+                    f"the paper's ({_fmt(paper_odo)}/km)", (header, rows)))  # fmt: skip
+    return out
+
+
+def _level_text(level: Any) -> str:
+    if isinstance(level, tuple):
+        return "z=" + ", θ=".join(f"{v:g}" for v in level)
+    return f"{level:g}"
+
+
+def _shape_cells(sh: Any, levels: Sequence[Any]) -> list[str]:
+    reach = "never" if sh.odometry_level is None else _level_text(levels[sh.odometry_level])
+    return [_fmt(sh.f_easiest), _fmt(sh.rank_correlation, 2), reach,
+            _fmt(sh.worse_than_odometry_below_t1)]  # fmt: skip
+
+
 def _markdown(table: Table) -> str:
     header, rows = table
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
@@ -224,7 +326,7 @@ def _tables(summary: Summary) -> list[tuple[str, Table]]:
                         "stretch over its length", drift_table(summary, town)))  # fmt: skip
         out.append((f"{name}: where failures happen (25 m stretches of the route) and the "
                     "mean tracking error", fragmentation_table(summary, town)))  # fmt: skip
-    return out
+    return out + paper_comparison_tables(summary)
 
 
 # -- figures --------------------------------------------------------------------------------------

@@ -16,7 +16,8 @@ from numpy.typing import NDArray
 
 from vlocbench.sim import textures as tex
 from vlocbench.sim.backend import missing_libraries_error, select_backend
-from vlocbench.sim.conditions import Conditions, Exposure
+from vlocbench.sim.conditions import Conditions
+from vlocbench.sim.light import NOON_AMBIENT, daylight, exposure_gain, sensor_noise
 from vlocbench.sim.rain import apply_rain
 from vlocbench.sim.scene import (
     GROUP_COLLISION,
@@ -29,13 +30,14 @@ from vlocbench.sim.scene import (
 
 Image = NDArray[np.uint8]
 NEAR_M, FAR_M = 0.1, 2000.0
+# what the camera's light meter reads of the car's own headlights, per unit of their intensity
+HEADLIGHT_METERING = 0.2
 LEAVES = {"summer": (0.33, 0.55, 0.22), "autumn": (0.85, 0.45, 0.12), "winter": (0.5, 0.5, 0.5)}
 
 
-def sky_colors(c: Conditions) -> tuple[NDArray, NDArray, float]:
-    """Zenith and horizon colours (RGB in [0, 1]) and the sky brightness."""
+def sky_colors(c: Conditions, brightness: float) -> tuple[NDArray, NDArray]:
+    """Zenith and horizon colours (RGB in [0, 1]) of a sky of exposed ``brightness`` (0-1)."""
     ill, w = c.illumination, c.weather
-    brightness = float(np.clip(ill.sun_intensity, 0, 1) ** 0.45)
     dusk = float(np.clip(1 - ill.sun_elevation_rad / np.radians(15), 0, 1))  # low sun: warm horizon
     zenith = (
         np.array([0.30, 0.50, 0.85]) * (1 - 0.3 * dusk) + np.array([0.2, 0.2, 0.4]) * 0.3 * dusk
@@ -45,19 +47,18 @@ def sky_colors(c: Conditions) -> tuple[NDArray, NDArray, float]:
     zenith = zenith * (1 - w.overcast) + grey * w.overcast
     horizon = horizon * (1 - w.overcast) + grey * 1.05 * w.overcast
     if w.fog_visual_range_m is not None:
-        fog = fog_color(c)
+        fog = fog_color(c, brightness)
         # the sky lies beyond any fog that starts at a distance; exponential fog leaves some blue
         mix = (
             1.0
             if w.fog_model == "starts_at"
             else float(np.clip(60.0 / w.fog_visual_range_m, 0.5, 1.0))
         )
-        return zenith * brightness * (1 - mix) + fog * mix, fog, brightness
-    return zenith * brightness, horizon * brightness, brightness
+        return zenith * brightness * (1 - mix) + fog * mix, fog
+    return zenith * brightness, horizon * brightness
 
 
-def fog_color(c: Conditions) -> NDArray:
-    brightness = float(np.clip(c.illumination.sun_intensity, 0, 1) ** 0.45)
+def fog_color(c: Conditions, brightness: float) -> NDArray:
     return np.array([0.72, 0.74, 0.76]) * brightness * (1 - 0.2 * c.weather.rain)
 
 
@@ -81,7 +82,7 @@ class Renderer:
         self.conditions = conditions
         m, sc = self.scene.model, self.scene
         ill, w = conditions.illumination, conditions.weather
-        intensity, elevation = ill.sun_intensity, ill.sun_elevation_rad
+        elevation = ill.sun_elevation_rad
         az = np.radians(ill.sun_azimuth_deg)
         # light travels from the sun towards the ground
         m.light_dir[sc.sun_light_id] = -np.array(
@@ -89,16 +90,24 @@ class Renderer:
         )
         dusk = float(np.clip(1 - elevation / np.radians(15), 0, 1))
         sun_color = np.array([1.0, 0.97, 0.92]) * (1 - dusk) + np.array([1.0, 0.7, 0.45]) * dusk
-        direct = 0.7 * intensity * (1 - 0.75 * w.overcast)
-        ambient = 0.35 * intensity**0.4 * (1 + 0.25 * w.overcast)
-        m.light_diffuse[sc.sun_light_id] = sun_color * direct
-        m.light_ambient[sc.sun_light_id] = np.array([0.92, 0.95, 1.0]) * ambient
-        m.light_specular[sc.sun_light_id] = 0.2 * direct
+        light = daylight(ill.sun_intensity, elevation, w.overcast, ill.sun_elevation_base_rad)
         h = conditions.headlights
+        e = conditions.exposure
+        noon = daylight(1.0, ill.sun_elevation_base_rad, 0.0, ill.sun_elevation_base_rad)
+        headlight_reading = HEADLIGHT_METERING * h.intensity if h.on else 0.0
+        self.gain = (
+            exposure_gain(light, noon, headlight_reading, e.max_gain) if e.mode == "auto" else 1.0
+        )
+        g = self.gain
+        m.light_diffuse[sc.sun_light_id] = sun_color * light.direct * g
+        m.light_ambient[sc.sun_light_id] = np.array([0.92, 0.95, 1.0]) * light.ambient * g
+        m.light_specular[sc.sun_light_id] = 0.2 * light.direct * g
         for lid in sc.headlight_ids:
             m.light_active[lid] = h.on
-            m.light_diffuse[lid] = np.array([1.0, 0.97, 0.88]) * h.intensity
+            m.light_diffuse[lid] = np.array([1.0, 0.97, 0.88]) * h.intensity * g
             m.light_cutoff[lid] = h.cutoff_deg
+        # the sky's luminance follows the skylight; displayed with a gamma of about 1 / 2.2
+        self.sky_brightness = float(np.clip(light.ambient * g / NOON_AMBIENT, 0, 1) ** 0.45)
         self._apply_season(conditions)
         wet = w.ground_wetness
         for name in ("road", "intersection", "paving", "crosswalk"):
@@ -110,7 +119,7 @@ class Renderer:
                 m.mat_rgba[mid, :3] = base[:3] * (1 - 0.35 * wet)
                 m.mat_specular[mid] = 0.05 + 0.6 * wet
                 m.mat_shininess[mid] = 0.1 + 0.7 * wet
-        zenith, horizon, _ = sky_colors(conditions)
+        zenith, horizon = sky_colors(conditions, self.sky_brightness)
         image = tex.sky(tuple(zenith), tuple(horizon), SKY_SIZE)
         start = m.tex_adr[sc.sky_texture_id]
         m.tex_data[start : start + image.size] = image.ravel()
@@ -162,7 +171,7 @@ class Renderer:
             return
         # MuJoCo reads its (linear) fog settings only when the context is made; set GL state.
         # Under fog it draws no skybox but clears to the context's fog colour: set that too.
-        r._mjr_context.fogRGBA[:] = [*fog_color(self.conditions), 1.0]
+        r._mjr_context.fogRGBA[:] = [*fog_color(self.conditions, self.sky_brightness), 1.0]
         r._gl_context.make_current()
         if w.fog_model == "starts_at":
             GL.glFogi(GL.GL_FOG_MODE, GL.GL_LINEAR)
@@ -171,7 +180,7 @@ class Renderer:
         else:
             GL.glFogi(GL.GL_FOG_MODE, GL.GL_EXP)
             GL.glFogf(GL.GL_FOG_DENSITY, w.fog_density_per_m)
-        GL.glFogfv(GL.GL_FOG_COLOR, [*fog_color(self.conditions), 1.0])
+        GL.glFogfv(GL.GL_FOG_COLOR, [*fog_color(self.conditions, self.sky_brightness), 1.0])
 
     def render(
         self,
@@ -210,9 +219,11 @@ class Renderer:
         rain = self.conditions.weather.rain
         seed = zlib.crc32(f"{sc.town.spec.seed}:{frame_id}".encode())
         if rain > 0:
-            _, _, brightness = sky_colors(self.conditions)
-            image = apply_rain(image, rain, brightness, np.random.default_rng(seed))
-        return expose(image, self.conditions.exposure, np.random.default_rng(seed + 1))
+            image = apply_rain(image, rain, self.sky_brightness, np.random.default_rng(seed))
+        e = self.conditions.exposure
+        return sensor_noise(
+            image, self.gain, e.shot_noise, e.read_noise, np.random.default_rng(seed + 1)
+        )
 
     @staticmethod
     def _add_markers(
@@ -237,17 +248,3 @@ class Renderer:
         for r in self._renderers.values():
             r.close()
         self._renderers.clear()
-
-
-def expose(image: Image, exposure: Exposure, rng: np.random.Generator) -> Image:
-    """Auto-exposure: gain towards the target mean brightness, with gain-scaled sensor noise."""
-    if exposure.mode == "fixed":
-        return image
-    mean = float(image.mean())
-    gain = float(np.clip(exposure.target_mean / max(mean, 1e-3), 1.0, exposure.max_gain))
-    if gain == 1.0:
-        return image
-    noisy = (
-        image.astype(np.float32) + rng.normal(0.0, exposure.noise_sigma, image.shape[:2])[..., None]
-    )
-    return np.clip(noisy * gain, 0, 255).astype(np.uint8)

@@ -27,7 +27,7 @@ Array = NDArray[np.float64]
 GROUP_STATIC, GROUP_FOLIAGE_FULL, GROUP_FOLIAGE_SPARSE = 0, 1, 2
 GROUP_TRAFFIC, GROUP_COLLISION, GROUP_EGO = 3, 4, 5
 # bump when the look of the towns changes: galleries and maps (and results) are keyed by it
-SCENE_VERSION = 4
+SCENE_VERSION = 5
 GROUND_FLOOR_M = 4.2
 SHOP_ATLAS_COLUMNS = 8
 SKY_SIZE = 64

@@ -1,0 +1,48 @@
+import itertools
+
+import numpy as np
+import pytest
+
+from vlocbench.sim.conditions import Illumination
+from vlocbench.sim.light import (
+    NOON_AMBIENT,
+    NOON_DIRECT,
+    air_mass,
+    daylight,
+    exposure_gain,
+    sensor_noise,
+)
+
+
+def test_air_mass_and_daylight_follow_the_sun():
+    assert air_mass(np.pi / 2) == pytest.approx(1.0, abs=0.01)
+    assert air_mass(0.0) == pytest.approx(38.0, rel=0.05)  # Kasten and Young at the horizon
+    base = Illumination().sun_elevation_base_rad
+    noon = daylight(1.0, base, 0.0, base)
+    assert (noon.direct, noon.ambient) == pytest.approx((NOON_DIRECT, NOON_AMBIENT))
+    levels = [Illumination(k=k) for k in range(11)]
+    light = [daylight(i.sun_intensity, i.sun_elevation_rad, 0.0, base).horizontal for i in levels]
+    assert all(a > b for a, b in itertools.pairwise(light))
+    # each step of k halves the sun, and near the horizon its skylight fades too
+    assert light[6] / light[8] == pytest.approx(4 * np.sqrt(np.sin(levels[6].sun_elevation_rad)
+                                                           / np.sin(levels[8].sun_elevation_rad)),
+                                                rel=0.05)  # fmt: skip
+    cloudy = daylight(1.0, base, 1.0, base)
+    assert cloudy.direct < noon.direct and cloudy.ambient > noon.ambient
+
+
+def test_exposure_gain_and_sensor_noise():
+    base = Illumination().sun_elevation_base_rad
+    noon = daylight(1.0, base, 0.0, base)
+    dim = daylight(1 / 64, base / 64, 0.0, base)
+    assert exposure_gain(noon, noon, 0.0, 100.0) == 1.0
+    assert exposure_gain(dim, noon, 0.0, 1e9) == pytest.approx(noon.horizontal / dim.horizontal)
+    assert exposure_gain(dim, noon, 0.0, 8.0) == 8.0  # the end of the camera's range
+    assert exposure_gain(dim, noon, 10.0, 1e9) == 1.0  # headlights fill the meter
+    grey = np.full((200, 200, 3), 64, np.uint8)
+    rng = np.random.default_rng(0)
+    low = sensor_noise(grey, 1.0, 0.02, 0.0, rng).astype(float)
+    high = sensor_noise(grey, 100.0, 0.02, 0.0, rng).astype(float)
+    assert low.std() == pytest.approx(np.sqrt(0.02 * 64), rel=0.15)
+    assert high.std() == pytest.approx(np.sqrt(0.02 * 100 * 64), rel=0.1)
+    assert np.allclose(low[..., 0], low[..., 1])  # one draw per pixel: grey noise
