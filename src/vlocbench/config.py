@@ -133,3 +133,11 @@ def require(condition: bool, field: str, reason: str) -> None:
     """Raise ``ConfigError(field, reason)`` unless ``condition`` holds."""
     if not condition:
         raise ConfigError(field, reason)
+
+
+def require_one_of(value: Any, valid: typing.Iterable[Any], field: str) -> None:
+    """Raise ``UnknownNameError`` (listing the valid ones) unless ``value`` is one of ``valid``:
+    named options built directly, not through ``from_dict``, are checked as strictly."""
+    valid = tuple(valid)
+    if value not in valid:
+        raise UnknownNameError(field, str(value), [str(v) for v in valid])

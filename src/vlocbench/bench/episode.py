@@ -30,7 +30,7 @@ from vlocbench.bench.records import (
     Segment,
     Trajectory,
 )
-from vlocbench.config import config_hash, require
+from vlocbench.config import config_hash, require, require_one_of
 from vlocbench.geometry import Array, planar_pose, pose_error, wrap_angle
 from vlocbench.nav import (
     ControllerConfig,
@@ -105,16 +105,8 @@ class EpisodeConfig:
             f"must be in (0, 20] Hz, got {self.localization_rate_hz}",
         )
         require(self.time_limit_factor >= 1, "time_limit_factor", "must be >= 1")
-        require(
-            self.mode in ("navigate", "ground_truth"),
-            "mode",
-            f"must be one of navigate, ground_truth; got {self.mode!r}",
-        )
-        require(
-            self.speed_source in ("ekf", "speedometer"),
-            "speed_source",
-            f"must be one of ekf, speedometer; got {self.speed_source!r}",
-        )
+        require_one_of(self.mode, ("navigate", "ground_truth"), "mode")
+        require_one_of(self.speed_source, ("ekf", "speedometer"), "speed_source")
 
 
 def plan_town_route(town: Town, spacing_m: float = 2.0) -> WaypointPath:

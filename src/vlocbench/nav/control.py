@@ -18,7 +18,7 @@ from typing import Literal
 
 import numpy as np
 
-from vlocbench.config import require
+from vlocbench.config import require, require_one_of
 from vlocbench.geometry import wrap_angle
 from vlocbench.nav.path import Array
 
@@ -41,11 +41,7 @@ class PidGains:
         for name in ("kp", "ki", "kd"):
             require(getattr(self, name) >= 0, f"pid.{name}", "must be >= 0")
         require(self.integral_limit > 0, "pid.integral_limit", "must be > 0")
-        require(
-            self.time_base in ("step", "second"),
-            "pid.time_base",
-            f"must be one of step, second; got {self.time_base!r}",
-        )
+        require_one_of(self.time_base, ("step", "second"), "pid.time_base")
 
 
 class Pid:

@@ -29,7 +29,7 @@ from typing import Literal
 
 import numpy as np
 
-from vlocbench.config import require
+from vlocbench.config import require, require_one_of
 from vlocbench.geometry import wrap_angle
 from vlocbench.nav.odometry import OdometryReading
 from vlocbench.nav.path import Array
@@ -65,16 +65,8 @@ class EkfConfig:
     history_s: float = 10.0  # late_measurements="replay": how late a measurement may be
 
     def __post_init__(self) -> None:
-        require(
-            self.odometry_fusion in ("twist", "input"),
-            "ekf.odometry_fusion",
-            f"must be one of twist, input; got {self.odometry_fusion!r}",
-        )
-        require(
-            self.late_measurements in ("current", "replay"),
-            "ekf.late_measurements",
-            f"must be one of current, replay; got {self.late_measurements!r}",
-        )
+        require_one_of(self.odometry_fusion, ("twist", "input"), "ekf.odometry_fusion")
+        require_one_of(self.late_measurements, ("current", "replay"), "ekf.late_measurements")
         for name in (
             "position_var_m2",
             "yaw_var_rad2",

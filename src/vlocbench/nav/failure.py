@@ -9,8 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Literal
 
-from vlocbench.config import require
-from vlocbench.errors import UnknownNameError
+from vlocbench.config import require, require_one_of
 
 FailureCause = Literal["collision", "stuck", "off_route", "timeout"]
 DETECTED_CAUSES: tuple[str, ...] = ("collision", "stuck", "off_route")
@@ -29,8 +28,7 @@ class FailureConfig:
 
     def __post_init__(self) -> None:
         for cause in self.causes:
-            if cause not in DETECTED_CAUSES:
-                raise UnknownNameError("failure cause", cause, DETECTED_CAUSES)
+            require_one_of(cause, DETECTED_CAUSES, "failure.causes")
         require(len(set(self.causes)) == len(self.causes), "failure.causes", "lists a cause twice")
         for name in ("collision_debounce_m", "collision_debounce_s", "stuck_speed_mps"):
             require(getattr(self, name) >= 0, f"failure.{name}", "must be >= 0")

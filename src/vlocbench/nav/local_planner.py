@@ -22,7 +22,7 @@ from typing import Literal
 
 import numpy as np
 
-from vlocbench.config import require
+from vlocbench.config import require, require_one_of
 from vlocbench.nav.path import Array, WaypointPath
 
 
@@ -42,11 +42,7 @@ class LocalPlannerConfig:
     search_ahead_m: float = 40.0
 
     def __post_init__(self) -> None:
-        require(
-            self.rule in ("paper", "band"),
-            "local_planner.rule",
-            f"must be one of paper, band; got {self.rule!r}",
-        )
+        require_one_of(self.rule, ("paper", "band"), "local_planner.rule")
         require(self.min_lookahead_s >= 0, "local_planner.min_lookahead_s", "must be >= 0")
         require(
             self.max_lookahead_s > self.min_lookahead_s,

@@ -12,7 +12,7 @@ from typing import Literal
 
 import numpy as np
 
-from vlocbench.config import require
+from vlocbench.config import require, require_one_of
 from vlocbench.errors import UnknownNameError
 
 Season = Literal["summer", "autumn", "winter"]
@@ -66,8 +66,7 @@ class Weather:
     fog_ramp_m: float = 5.0  # starts_at: from clear at v to opaque at v + fog_ramp_m
 
     def __post_init__(self) -> None:
-        if self.fog_model not in ("starts_at", "exponential"):
-            raise UnknownNameError("fog model", self.fog_model, ("starts_at", "exponential"))
+        require_one_of(self.fog_model, ("starts_at", "exponential"), "weather.fog_model")
         require(self.fog_ramp_m > 0, "weather.fog_ramp_m", "must be > 0 m")
         if self.fog_visual_range_m is not None:
             require(
