@@ -91,6 +91,6 @@ def test_bad_config():
     with pytest.raises(ConfigError, match=r"failure\.off_route_m"):
         FailureConfig(off_route_m=0)
     with pytest.raises(
-        ConfigError, match="unknown failure.causes 'crash'; valid: collision, off_route, stuck"
+        ConfigError, match=r"unknown failure\.causes 'crash'; valid: collision, off_route, stuck"
     ):
         FailureConfig(causes=("crash",))
