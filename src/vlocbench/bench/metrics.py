@@ -16,8 +16,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from vlocbench.bench.records import EpisodeResult
+from vlocbench.bench.records import EpisodeResult, per_km
 from vlocbench.geometry import wrap_angle
+from vlocbench.nav import Drift
 
 # (position m, yaw deg): the paper's three plus a coarse (20 m, 180 deg) "right street" level
 RECALL_THRESHOLDS: tuple[tuple[float, float], ...] = (
@@ -87,7 +88,7 @@ def drift_segments(result: EpisodeResult) -> tuple[tuple[float, float, float], .
 
 
 @dataclass(frozen=True)
-class Drift:
+class PooledDrift:
     """Pooled drift of failure-free stretches: mean position error over length (%), mean yaw
     error per metre, and how many stretches."""
 
@@ -96,13 +97,16 @@ class Drift:
     segments: int
 
 
-def pooled_drift(segments: Sequence[Sequence[float]]) -> Drift:
-    """Mean over stretches of (position error / length) and (yaw error / length)."""
-    a = np.asarray(segments, np.float64).reshape(-1, 3)
-    if len(a) == 0:
-        return Drift(float("nan"), float("nan"), 0)
-    return Drift(
-        float(np.mean(100.0 * a[:, 1] / a[:, 0])), float(np.mean(a[:, 2] / a[:, 0])), len(a)
+def pooled_drift(segments: Sequence[Sequence[float]]) -> PooledDrift:
+    """Mean over stretches ((distance m, position error m, yaw error deg) each, as
+    :func:`drift_segments` gives them) of the position error and the yaw error per metre."""
+    drifts = [Drift(*map(float, seg)) for seg in segments]
+    if not drifts:
+        return PooledDrift(float("nan"), float("nan"), 0)
+    return PooledDrift(
+        float(np.mean([d.position_percent for d in drifts])),
+        float(np.mean([d.yaw_deg_per_m for d in drifts])),
+        len(drifts),
     )
 
 
@@ -202,7 +206,7 @@ def failure_rate_by_cause(
     out: dict[str, float] = {}
     for episode_causes, covered in zip(causes, covered_m):
         for cause in episode_causes:
-            out[cause] = out.get(cause, 0.0) + 1.0 / (max(covered, 1.0) / 1000.0) / n
+            out[cause] = out.get(cause, 0.0) + per_km(1, covered) / n
     return dict(sorted(out.items()))
 
 

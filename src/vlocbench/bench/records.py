@@ -9,6 +9,12 @@ import numpy as np
 from vlocbench.geometry import Array
 
 
+def per_km(count: float, covered_m: float) -> float:
+    """``count`` failures over ``covered_m`` of route, per km; at least one metre, so that a car
+    that never got going has a finite, huge rate."""
+    return count / (max(covered_m, 1.0) / 1000.0)
+
+
 @dataclass(frozen=True, kw_only=True)
 class LocalizationRecord:
     """One localization call: the image time, the estimate against the truth at that time.
@@ -127,9 +133,8 @@ class EpisodeResult:
 
     @property
     def failures_per_km(self) -> float:
-        """r / L_km: this episode's term of the failure rate F (L: the route it covered; at least
-        one metre, so that a car that never got going has a finite, huge rate)."""
-        return self.failures / (max(self.route_covered_m, 1.0) / 1000.0)
+        """r / L_km: this episode's term of the failure rate F (L: the route it covered)."""
+        return per_km(self.failures, self.route_covered_m)
 
     @property
     def real_time_factor(self) -> float:

@@ -27,7 +27,7 @@ import numpy as np
 
 from vlocbench.bench.paper import FACTOR_OF_AXIS, PaperTable, paper_results, shape
 from vlocbench.bench.store import read_latest_run
-from vlocbench.bench.summary import BASELINE, Summary, spec_from_stored, summarize
+from vlocbench.bench.summary import BASELINE, Cell, Summary, spec_from_stored, summarize
 
 REPORT_DIR = "report"
 COLORS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2", "#17becf")
@@ -61,6 +61,10 @@ def _short(summary: Summary, label: str) -> str:
     return "; ".join(parts)
 
 
+def _method_label(method: str) -> str:
+    return "odometry only" if method == BASELINE else method
+
+
 def _fmt(value: float, digits: int = 1) -> str:
     return "–" if value is None or not np.isfinite(value) else f"{value:.{digits}f}"
 
@@ -69,7 +73,7 @@ def failure_table(summary: Summary, town: str) -> Table:
     header = ["method", *(_short(summary, s.label) for s in summary.setups), "CT (ms)"]
     rows = []
     for method in summary.methods:
-        row = ["odometry only" if method == BASELINE else method]
+        row = [_method_label(method)]
         cts = []
         for s in summary.setups:
             c = summary.cell(town, method, s.label)
@@ -126,19 +130,23 @@ def cause_table(summary: Summary, town: str) -> Table:
             continue
         seen.add(c.keys)
         label = "all" if method == BASELINE else _short(summary, s.label)
-        rows.append(["odometry only" if method == BASELINE else method, label,
+        rows.append([_method_label(method), label,
                      *(_fmt(c.failure_by_cause.get(k, 0.0)) for k in causes), str(c.timeouts)])  # fmt: skip
     return header, rows
+
+
+def _baseline_cell(summary: Summary, town: str) -> Cell | None:
+    """The odometry-only cell of a town (the first setup's: setups share it unless traffic
+    differs)."""
+    cells = (summary.cell(town, BASELINE, s.label) for s in summary.setups)
+    return next((c for c in cells if c is not None), None)
 
 
 def drift_table(summary: Summary, town: str) -> Table:
     """The odometry-only EKF's drift as the paper measured it (at the end of each failure-free
     stretch, over its length; the paper: 8.5 % and 0.4 deg/m)."""
     header = ["method", "position drift (%)", "yaw drift (deg/m)", "stretches", "paper"]
-    c = next(
-        (x for s in summary.setups if (x := summary.cell(town, BASELINE, s.label)) is not None),
-        None,
-    )
+    c = _baseline_cell(summary, town)
     if c is None:
         return header, []
     d = c.drift
@@ -172,7 +180,7 @@ def fragmentation_table(summary: Summary, town: str) -> Table:
                 for o in summary.setups
             )
             label = "all" if shared else _short(summary, s.label)
-            rows.append(["odometry only" if method == BASELINE else method, label,
+            rows.append([_method_label(method), label,
                          str(f.failures), str(f.places), worst, _fmt(c.tracking_error_m, 2)])  # fmt: skip
     return header, rows
 
@@ -218,9 +226,7 @@ def paper_comparison_tables(summary: Summary) -> list[tuple[str, Table]]:
         name = summary.town_names[town]
         if name not in table.failure_rate:
             continue
-        odo_cell = next(
-            (c for s in summary.setups if (c := summary.cell(town, BASELINE, s.label))), None
-        )
+        odo_cell = _baseline_cell(summary, town)
         odo = odo_cell.failure.mean if odo_cell and odo_cell.failure else float("nan")
         paper_odo = paper.odometry_failure_rate[name]
         shared = [lv for lv in table.levels if lv in ours_levels]
@@ -228,8 +234,13 @@ def paper_comparison_tables(summary: Summary) -> list[tuple[str, Table]]:
         rows = []
         for method in summary.methods:
             f, _ = _ours(summary, town, method)
-            label = "odometry only" if method == BASELINE else method
-            rows.append(["vlocbench", label, *(_fmt(f[ours_levels.index(lv)]) for lv in shared)])
+            rows.append(
+                [
+                    "vlocbench",
+                    _method_label(method),
+                    *(_fmt(f[ours_levels.index(lv)]) for lv in shared),
+                ]
+            )
         for method, f in table.failure_rate[name].items():
             rows.append(["paper", method, *(_fmt(f[table.levels.index(lv)]) for lv in shared)])
         rows.append(["paper", "odometry only", *(_fmt(paper_odo) for _ in shared)])

@@ -17,9 +17,9 @@ import numpy as np
 
 from vlocbench.bench.experiment import ExperimentSpec, Setup, load_experiment, setups, sweep_keys
 from vlocbench.bench.metrics import (
-    Drift,
     FailureRate,
     Fragmentation,
+    PooledDrift,
     failure_rate,
     failure_rate_by_cause,
     fragmentation,
@@ -47,7 +47,7 @@ class Cell:
     ct_s: float  # mean computation time per query (NaN: none)
     fragmentation: Fragmentation | None
     tracking_error_m: float
-    drift: Drift  # the EKF's at the end of failure-free stretches of the failure episodes
+    drift: PooledDrift  # the EKF's at the end of failure-free stretches of the failure episodes
     sites_xy: tuple[tuple[float, float], ...]  # failure sites of all repetitions
     errors: int  # episodes that ended in an error (not counted above)
     keys: frozenset[str]  # the episodes behind this cell (a baseline's serve several setups)

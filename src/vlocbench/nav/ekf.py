@@ -31,7 +31,7 @@ import numpy as np
 
 from vlocbench.config import require, require_one_of
 from vlocbench.geometry import wrap_angle
-from vlocbench.nav.odometry import OdometryReading
+from vlocbench.nav.odometry import OdometryReading, integrate_planar
 from vlocbench.nav.path import Array
 
 _N = 6  # x, y, yaw, v, w, a
@@ -186,8 +186,8 @@ class Ekf:
                 [0, 0, 1, 0, dt_s, 0],
             ]
         )
-        pose = (x + d * c, y + d * s, float(wrap_angle(yaw + w * dt_s)))
-        return np.array(pose), J
+        # the mean speed over the step, d / dt, along the mid-step heading
+        return np.array(integrate_planar(x, y, yaw, d / dt_s, w, dt_s)), J
 
     def _process_noise(self, dt_s: float) -> Array:
         c = self.config
