@@ -28,6 +28,14 @@ def test_bad_values_name_their_field():
         Conditions(season="spring")  # type: ignore[arg-type]
     with pytest.raises(ConfigError, match=r"exposure\.max_gain"):
         Exposure(max_gain=0.5)
+    with pytest.raises(ConfigError, match=r"exposure\.shot_noise: must be >= 0"):
+        Exposure(shot_noise=-0.1)
+    with pytest.raises(ConfigError, match=r"exposure\.read_noise: must be >= 0"):
+        Exposure(read_noise=-1.0)
+    with pytest.raises(ConfigError, match=r"weather\.fog_ramp_m: must be > 0"):
+        Weather(fog_visual_range_m=30, fog_ramp_m=0)
+    with pytest.raises(UnknownNameError, match="valid: exponential, starts_at"):
+        Weather(fog_model="haze")  # type: ignore[arg-type]
     with pytest.raises(UnknownNameError, match="valid: auto, fixed"):
         from_dict(Conditions, {"exposure": {"mode": "manual"}})
 
