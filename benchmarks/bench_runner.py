@@ -39,7 +39,7 @@ def main() -> None:
         {**EXPERIMENT, "output": str(args.out / "warmup"), "cache": str(args.out / "cache")}
     )
     shutil.rmtree(spec.output_dir, ignore_errors=True)
-    run_experiment(spec, progress=False, log=lambda s: None)  # gallery, map, imports, caches
+    run_experiment(spec, progress=False)  # gallery, map, imports, caches
     for workers in (int(w) for w in args.workers.split(",")):
         rates, overheads, stores = [], [], []
         for k in range(args.repeats):
@@ -51,7 +51,6 @@ def main() -> None:
                 ),
                 workers=workers,
                 progress=False,
-                log=lambda s: None,
             )
             rates.append(s.finished / s.episodes_wall_s * 3600)
             overheads.append(100 * s.harness_overhead)

@@ -52,7 +52,7 @@ CAMERA = Camera("right", Intrinsics(320, 240, 90.0), Extrinsics())
 @pytest.fixture(scope="session")
 def stretch(small_town):
     """The first 60 m of the small town's route."""
-    from vlocbench.bench.episode import plan_town_route
+    from vlocbench.bench.towns import plan_town_route
     from vlocbench.nav import WaypointPath
 
     path = plan_town_route(small_town)

@@ -1,4 +1,4 @@
-from vlocbench.cli import main
+from vlocbench.cli import build_parser, main
 
 
 def test_map_writes_a_png(tmp_path, capsys):
@@ -8,13 +8,13 @@ def test_map_writes_a_png(tmp_path, capsys):
 
 
 def test_unknown_town_is_a_clear_error(capsys):
-    assert main(["map", "nowhere"]) == 2
+    assert main(["map", "nowhere"]) == 1
     err = capsys.readouterr().err
     assert "unknown town 'nowhere'" in err and "town01" in err and "town10" in err
 
 
 def test_bad_fov_names_the_field(capsys, tmp_path):
-    assert main(["render", "town10", "--fov", "0", "-o", str(tmp_path / "x.png")]) == 2
+    assert main(["render", "town10", "--fov", "0", "-o", str(tmp_path / "x.png")]) == 1
     assert "fov_deg" in capsys.readouterr().err
 
 
@@ -29,11 +29,11 @@ def test_drive_prints_failure_rates(capsys, tmp_path):
 
 
 def test_drive_rejects_unknown_localizers_and_bad_configs(capsys, tmp_path):
-    assert main(["drive", "town10", "--localizer", "gps"]) == 2
+    assert main(["drive", "town10", "--localizer", "gps"]) == 1
     assert "unknown localizer 'gps'; valid: odometry, oracle, visual" in capsys.readouterr().err
     config = tmp_path / "episode.yaml"
     config.write_text("latency: {mode: sometimes}\n")
-    assert main(["drive", "town10", "--config", str(config)]) == 2
+    assert main(["drive", "town10", "--config", str(config)]) == 1
     assert "valid: fixed, measured, none" in capsys.readouterr().err
 
 
@@ -71,9 +71,35 @@ def test_gallery_build_map_and_localize(tmp_path, capsys):
         == 0
     )
     assert "seed 0: 0 failures" in capsys.readouterr().out
-    assert main(["drive", str(spec), "--localizer", "visual"]) == 2
+    assert main(["drive", str(spec), "--localizer", "visual"]) == 1
     assert "needs --map" in capsys.readouterr().err
-    assert main(["build-map", str(gallery), "--method", "surf"]) == 2
+    assert main(["build-map", str(gallery), "--method", "surf"]) == 1
     assert "unknown method 'surf'" in capsys.readouterr().err
-    assert main(["localize", str(image), "--map", str(tmp_path / "none")]) == 2
+    assert main(["localize", str(image), "--map", str(tmp_path / "none")]) == 1
     assert "not a map" in capsys.readouterr().err
+
+
+def test_exit_codes_by_kind_of_error(capsys, tmp_path):
+    import pytest
+
+    with pytest.raises(SystemExit) as exc:  # the command line itself is wrong: usage, 2
+        main(["drive", "town10", "--seeds", "0"])
+    assert exc.value.code == 2
+    assert "--seeds: must be at least 1, got 0" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exc:
+        main(["drive", "town10", "--colour", "red"])
+    assert exc.value.code == 2
+    assert main(["render", "town10", "--k", "11", "-o", str(tmp_path / "x.png")]) == 1  # input
+    assert "illumination.k: must be in [0, 10], got 11" in capsys.readouterr().err
+    busy = tmp_path / "busy"
+    from vlocbench.bench.store import ResultStore
+
+    experiment = tmp_path / "exp.yaml"
+    experiment.write_text("name: exp\ntowns: [town10]\nmethods: [sift]\n")
+    with ResultStore(busy, "exp"):  # another run holds the folder: the machine's state, 3
+        assert main(["run", str(experiment), "--output", str(busy), "--no-progress"]) == 3
+        assert "in use by another vlocbench run" in capsys.readouterr().err
+    assert main(["report", str(busy)]) == 1  # no run in it yet: input
+    assert "has no run yet" in capsys.readouterr().err
+    help_text = build_parser().format_help()
+    assert "exit codes:" in help_text and "3  the machine stops it" in help_text

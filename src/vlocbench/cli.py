@@ -1,16 +1,24 @@
-"""The ``vlocbench`` command line. The only place that turns errors into messages and exit codes."""
+"""The ``vlocbench`` command line. The only place that turns errors into messages and exit codes
+(listed in ``vlocbench --help``)."""
 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import logging
+import signal
 import sys
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
+from typing import Any
 
 from vlocbench import __version__
 from vlocbench.errors import VlocbenchError
 
-EXIT_USAGE = 2
+EXIT_INPUT = 1
+EXIT_USAGE = 2  # argparse's own
+EXIT_MACHINE = 3
+EXIT_INTERRUPTED = 130  # the shell's code for a SIGINT
 
 
 def _towns(args: argparse.Namespace) -> int:
@@ -66,12 +74,11 @@ def _render(args: argparse.Namespace) -> int:
     n = len(town.route.waypoints_xy)
     if not 0 <= args.waypoint < n:
         raise VlocbenchError(f"--waypoint: must be in [0, {n - 1}] for {town.name}'s route")
-    sim = Simulator(town, conditions)
     x, y = town.route.waypoints_xy[args.waypoint]
-    sim.teleport(float(x), float(y), float(town.route.yaw_rad[args.waypoint]))
-    frame = sim.render([camera])[0]
+    with Simulator(town, conditions) as sim:
+        sim.teleport(float(x), float(y), float(town.route.yaw_rad[args.waypoint]))
+        frame = sim.render([camera])[0]
     cv2.imwrite(str(args.output), frame.image[:, :, ::-1])
-    sim.close()
     print(f"wrote {args.output}")
     return 0
 
@@ -134,7 +141,6 @@ def _drive(args: argparse.Namespace) -> int:
     if args.mode:
         base = dataclasses.replace(base, mode=args.mode)
     town = generate_town(load_town_spec(args.town))
-    sim = Simulator(town)
     path = plan_town_route(town)
     localizer = localizers[args.localizer]()
     print(
@@ -142,17 +148,17 @@ def _drive(args: argparse.Namespace) -> int:
         f"config {config_hash(base)}"
     )
     rates = []
-    for seed in range(args.seed, args.seed + args.seeds):
-        r = run_episode(sim, path, localizer, dataclasses.replace(base, seed=seed))
-        rates.append(r.failures_per_km)
-        causes = ", ".join(f"{x.cause} at {x.resume_s_m:.0f} m" for x in r.reinitializations)
-        print(
-            f"  seed {seed}: {r.failures} failures ({r.failures_per_km:.1f}/km), tracking "
-            f"{r.tracking_error_mean_m:.2f} m, {'done' if r.completed else 'TIMED OUT'} in "
-            f"{r.sim_time_s:.0f} s simulated ({r.real_time_factor:.0f}x real time)"
-            + (f"; {causes}" if causes else "")
-        )
-    sim.close()
+    with Simulator(town) as sim:
+        for seed in range(args.seed, args.seed + args.seeds):
+            r = run_episode(sim, path, localizer, dataclasses.replace(base, seed=seed))
+            rates.append(r.failures_per_km)
+            causes = ", ".join(f"{x.cause} at {x.resume_s_m:.0f} m" for x in r.reinitializations)
+            print(
+                f"  seed {seed}: {r.failures} failures ({r.failures_per_km:.1f}/km), tracking "
+                f"{r.tracking_error_mean_m:.2f} m, {'done' if r.completed else 'TIMED OUT'} in "
+                f"{r.sim_time_s:.0f} s simulated ({r.real_time_factor:.0f}x real time)"
+                + (f"; {causes}" if causes else "")
+            )
     print(f"failure rate F = {np.mean(rates):.1f} per km over {len(rates)} episodes")
     return 0
 
@@ -167,13 +173,20 @@ def _run(args: argparse.Namespace) -> int:
     spec = load_experiment(args.experiment)
     if args.output:
         spec = dataclasses.replace(spec, output=str(args.output))
-    summary = run_experiment(
-        spec, workers=args.workers, scheduler=args.scheduler, progress=not args.no_progress
-    )
+    with _signals_interrupt():
+        summary = run_experiment(
+            spec, workers=args.workers, scheduler=args.scheduler, progress=not args.no_progress
+        )
+    overhead = summary.harness_overhead
     print(
         f"{spec.name}: {summary.finished} episodes run, {summary.skipped} done before, "
-        f"{summary.errors} with errors, {summary.retried} retried after a worker died; "
-        f"{summary.wall_s / 60:.1f} min (harness overhead {100 * summary.harness_overhead:.1f} %)"
+        f"{summary.errors} with errors; {summary.workers_lost} workers died, "
+        f"{summary.retried} episodes rerun after it; {summary.wall_s / 60:.1f} min "
+        + (
+            f"(harness overhead {100 * overhead:.1f} %)"
+            if overhead is not None
+            else "(no harness overhead: a worker died)"
+        )
     )
     if args.no_report:
         return 1 if summary.errors else 0
@@ -181,6 +194,22 @@ def _run(args: argparse.Namespace) -> int:
     print("\n".join(summary_lines(files.summary)))
     print(f"report: {files.html.resolve()}")
     return 1 if summary.errors else 0
+
+
+@contextlib.contextmanager
+def _signals_interrupt() -> Iterator[None]:
+    """SIGTERM, and SIGINT even where a shell started the run in the background with it ignored,
+    interrupt the run as Ctrl-C does: the workers stop, the store keeps what it has."""
+
+    def interrupt(signum: int, frame: object) -> None:
+        raise KeyboardInterrupt(signal.Signals(signum).name)
+
+    old = {sig: signal.signal(sig, interrupt) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for sig, handler in old.items():
+            signal.signal(sig, handler)
 
 
 def _report(args: argparse.Namespace) -> int:
@@ -193,19 +222,18 @@ def _report(args: argparse.Namespace) -> int:
 
 
 def _gallery(args: argparse.Namespace) -> int:
-    from vlocbench.bench.episode import plan_town_route
     from vlocbench.bench.gallery_capture import capture_gallery
+    from vlocbench.bench.towns import plan_town_route
     from vlocbench.sim import Camera, Conditions, Extrinsics, Illumination, Intrinsics, Simulator
     from vlocbench.sim.town import generate_town, load_town_spec
 
     town = generate_town(load_town_spec(args.town))
-    sim = Simulator(town, Conditions(illumination=Illumination(k=args.k)))
     camera = Camera("gallery", Intrinsics(args.width, args.height, args.fov), Extrinsics())
     out = args.out or Path("galleries") / f"{town.name}-k{args.k:g}"
-    gallery = capture_gallery(
-        sim, plan_town_route(town), (camera,), out, spacing_m=args.spacing, speed_mps=args.speed
-    )
-    sim.close()
+    with Simulator(town, Conditions(illumination=Illumination(k=args.k))) as sim:
+        gallery = capture_gallery(
+            sim, plan_town_route(town), (camera,), out, spacing_m=args.spacing, speed_mps=args.speed
+        )
     print(f"wrote {len(gallery)} images with their poses to {out}")
     return 0
 
@@ -274,29 +302,50 @@ def _localize(args: argparse.Namespace) -> int:
     return 0
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
-        prog="vlocbench",
-        description="Benchmark visual localization in closed-loop navigation on procedural "
-        "MuJoCo-rendered towns.",
-    )
-    parser.add_argument("--version", action="version", version=f"vlocbench {__version__}")
-    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+def _count(text: str) -> int:
+    """An argparse type: a whole number >= 1."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
+    return value
 
+
+def _parents() -> dict[str, argparse.ArgumentParser]:
+    """Options that several verbs share, defined once."""
+    town = argparse.ArgumentParser(add_help=False)
+    town.add_argument("town", help="built-in town name (see `vlocbench towns`) or a town spec YAML")
+    camera = argparse.ArgumentParser(add_help=False)
+    camera.add_argument("--width", type=_count, default=800, help="image width in pixels")
+    camera.add_argument("--height", type=_count, default=600, help="image height in pixels")
+    camera.add_argument(
+        "--fov", type=float, default=90.0, help="horizontal field of view in degrees"
+    )
+    k = argparse.ArgumentParser(add_help=False)
+    k.add_argument("--k", type=float, default=0.0, help="illumination level k, 0 (noon) to 10")
+    report = argparse.ArgumentParser(add_help=False)
+    report.add_argument(
+        "--no-examples", action="store_true", help="report without example images (no rendering)"
+    )
+    return {"town": town, "camera": camera, "k": k, "report": report}
+
+
+def _add_town_verbs(sub: Any, shared: dict[str, argparse.ArgumentParser]) -> None:
     p = sub.add_parser("towns", help="list the built-in towns and their routes")
     p.set_defaults(func=_towns)
 
-    p = sub.add_parser("map", help="write a bird's-eye map of a town and its route (PNG)")
-    p.add_argument("town", help="built-in town name (see `vlocbench towns`) or a town spec YAML")
+    p = sub.add_parser("map", parents=[shared["town"]],
+                       help="write a bird's-eye map of a town and its route (PNG)")  # fmt: skip
     p.add_argument("-o", "--output", type=Path, help="PNG path (default: TOWN.png)")
     p.add_argument("--no-route", action="store_true", help="draw the town without its route")
     p.set_defaults(func=_map)
 
-    p = sub.add_parser("render", help="render one camera image at a route waypoint")
-    p.add_argument("town", help="built-in town name or a town spec YAML")
+    p = sub.add_parser("render", parents=[shared["town"], shared["camera"], shared["k"]],
+                       help="render one camera image at a route waypoint")  # fmt: skip
     p.add_argument("-o", "--output", type=Path, default=Path("render.png"), help="image path")
     p.add_argument("--waypoint", type=int, default=0, help="route waypoint index (2 m apart)")
-    p.add_argument("--k", type=float, default=0.0, help="illumination level k (0 = noon)")
     p.add_argument("--fog", type=float, default=None, help="fog visual range in metres")
     p.add_argument("--rain", type=float, default=0.0, help="rain strength in [0, 1]")
     p.add_argument("--overcast", type=float, default=0.0, help="overcast in [0, 1]")
@@ -305,13 +354,18 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--dz", type=float, default=0.0, help="camera height offset in metres")
     p.add_argument("--pitch-down", type=float, default=0.0, help="camera tilt down in degrees")
     p.add_argument("--yaw", type=float, default=-90.0, help="camera yaw in degrees (-90: right)")
-    p.add_argument("--width", type=int, default=800)
-    p.add_argument("--height", type=int, default=600)
-    p.add_argument("--fov", type=float, default=90.0, help="horizontal field of view in degrees")
     p.set_defaults(func=_render)
 
-    p = sub.add_parser("drive", help="drive a town's route in closed loop and print failure rates")
-    p.add_argument("town", help="built-in town name or a town spec YAML")
+    p = sub.add_parser("tour", help="render towns under every condition and write an HTML report")
+    p.add_argument("--out", type=Path, default=Path("out/tour"), help="output folder")
+    p.add_argument("--towns", nargs="+", default=["town01", "town10"], help="towns to use")
+    p.add_argument("--stops", type=_count, default=3, help="places along each route to render")
+    p.set_defaults(func=_tour)
+
+
+def _add_drive_verb(sub: Any, shared: dict[str, argparse.ArgumentParser]) -> None:
+    p = sub.add_parser("drive", parents=[shared["town"]],
+                       help="drive a town's route in closed loop and print failure rates")  # fmt: skip
     p.add_argument(
         "--localizer", default="odometry", help="odometry (none), oracle, or visual (with --map)"
     )
@@ -319,20 +373,18 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--mode", choices=("navigate", "ground_truth"), help="override the config's")
     p.add_argument("--config", type=Path, help="episode config YAML (EpisodeConfig fields)")
     p.add_argument("--seed", type=int, default=0, help="first seed")
-    p.add_argument("--seeds", type=int, default=1, help="number of episodes (seeds)")
+    p.add_argument("--seeds", type=_count, default=1, help="number of episodes (seeds), >= 1")
     p.add_argument("--oracle-sigma", type=float, default=0.1, help="oracle position noise, m")
     p.add_argument("--oracle-yaw-deg", type=float, default=1.0, help="oracle yaw noise, deg")
     p.set_defaults(func=_drive)
 
-    p = sub.add_parser("gallery", help="drive a town's route and save gallery images with poses")
-    p.add_argument("town", help="built-in town name or a town spec YAML")
+
+def _add_map_verbs(sub: Any, shared: dict[str, argparse.ArgumentParser]) -> None:
+    p = sub.add_parser("gallery", parents=[shared["town"], shared["camera"], shared["k"]],
+                       help="drive a town's route and save gallery images with poses")  # fmt: skip
     p.add_argument("--out", type=Path, help="gallery folder (default: galleries/TOWN-kK)")
-    p.add_argument("--k", type=float, default=0.0, help="illumination level of the gallery")
     p.add_argument("--spacing", type=float, default=2.0, help="metres between images")
     p.add_argument("--speed", type=float, default=8.0, help="driving speed, m/s")
-    p.add_argument("--width", type=int, default=800)
-    p.add_argument("--height", type=int, default=600)
-    p.add_argument("--fov", type=float, default=90.0, help="horizontal field of view in degrees")
     p.set_defaults(func=_gallery)
 
     p = sub.add_parser("build-map", help="features, matches and triangulation of a gallery")
@@ -340,7 +392,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--method", default="sift", help="sift, orb-teblid, aliked-lightglue, ...")
     p.add_argument("--out", type=Path, help="map folder (default: maps/GALLERY/METHOD-HASH)")
     p.add_argument("--pairs", choices=("poses", "retrieval"), default="poses")
-    p.add_argument("--num-pairs", type=int, default=25)
+    p.add_argument("--num-pairs", type=_count, default=25)
     p.add_argument("--overwrite", action="store_true", help="recompute cached stages")
     p.set_defaults(func=_build_map)
 
@@ -351,39 +403,86 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--prior-image", help="gallery image whose pose is the prior (pose-prior maps)")
     p.set_defaults(func=_localize)
 
-    p = sub.add_parser("tour", help="render towns under every condition and write an HTML report")
-    p.add_argument("--out", type=Path, default=Path("out/tour"), help="output folder")
-    p.add_argument("--towns", nargs="+", default=["town01", "town10"], help="towns to use")
-    p.add_argument("--stops", type=int, default=3, help="places along each route to render")
-    p.set_defaults(func=_tour)
 
-    p = sub.add_parser(
-        "run", help="run an experiment file: galleries, maps, episodes, then the report"
-    )
+def _add_experiment_verbs(sub: Any, shared: dict[str, argparse.ArgumentParser]) -> None:
+    p = sub.add_parser("run", parents=[shared["report"]],
+                       help="run an experiment file: galleries, maps, episodes, then the report")  # fmt: skip
     p.add_argument("experiment", type=Path, help="experiment YAML (see experiments/)")
-    p.add_argument("--workers", type=int, default=1, help="local worker processes")
+    p.add_argument("--workers", type=_count, default=1, help="local worker processes")
     p.add_argument("--scheduler", help="Dask scheduler address, e.g. tcp://127.0.0.1:8786")
     p.add_argument("--output", type=Path, help="output folder (default: the experiment's)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--no-report", action="store_true", help="skip the report")
-    p.add_argument("--no-examples", action="store_true", help="report without example images")
     p.set_defaults(func=_run)
 
-    p = sub.add_parser("report", help="tables, figures and an HTML page of a run's results")
+    p = sub.add_parser("report", parents=[shared["report"]],
+                       help="tables, figures and an HTML page of a run's results")  # fmt: skip
     p.add_argument("output", type=Path, help="the experiment's output folder")
-    p.add_argument("--no-examples", action="store_true", help="no example images (no rendering)")
     p.set_defaults(func=_report)
+
+
+EXIT_CODES = f"""exit codes:
+  0  done
+  {EXIT_INPUT}  bad input or data: an unknown name, an invalid value (the message names the field),
+     a missing or damaged file, episodes that ended in errors
+  {EXIT_USAGE}  the command line is wrong (unknown option, missing or malformed argument)
+  {EXIT_MACHINE}  the machine stops it: no OpenGL, a full disk, an output folder another run holds
+  {EXIT_INTERRUPTED}  interrupted (Ctrl-C, SIGINT or SIGTERM); a rerun resumes
+"""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="vlocbench",
+        description="Benchmark visual localization in closed-loop navigation on procedural "
+        "MuJoCo-rendered towns.",
+        epilog=EXIT_CODES,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("--version", action="version", version=f"vlocbench {__version__}")
+    parser.add_argument("-v", "--verbose", action="store_true", help="log details (debug level)")
+    parser.add_argument("-q", "--quiet", action="store_true", help="log warnings and errors only")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    shared = _parents()
+    for add in (_add_town_verbs, _add_drive_verb, _add_map_verbs, _add_experiment_verbs):
+        add(sub, shared)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    args = build_parser().parse_args(argv)  # exits with EXIT_USAGE on a bad command line
+    _configure_logging(
+        logging.DEBUG if args.verbose else logging.WARNING if args.quiet else logging.INFO
+    )
     try:
         return int(args.func(args))
     except VlocbenchError as exc:
         print(f"vlocbench: error: {exc}", file=sys.stderr)
-        return EXIT_USAGE
+        return exc.exit_code
+    except OSError as exc:  # a file system or device failure we did not anticipate
+        print(f"vlocbench: error: {exc}", file=sys.stderr)
+        return EXIT_MACHINE
+    except KeyboardInterrupt:
+        print(
+            "vlocbench: interrupted; what finished is stored, run it again to resume",
+            file=sys.stderr,
+        )
+        return EXIT_INTERRUPTED
+
+
+class _StderrHandler(logging.Handler):
+    """Plain messages on the current ``sys.stderr`` (looked up per message, not kept)."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        print(self.format(record), file=sys.stderr, flush=True)
+
+
+def _configure_logging(level: int) -> None:
+    """The ``vlocbench`` logger: plain messages on stderr at ``level``."""
+    logger = logging.getLogger("vlocbench")
+    logger.setLevel(level)
+    if not any(isinstance(h, _StderrHandler) for h in logger.handlers):
+        logger.addHandler(_StderrHandler())
 
 
 if __name__ == "__main__":

@@ -6,7 +6,16 @@ from collections.abc import Iterable
 
 
 class VlocbenchError(Exception):
-    """Base class of every error raised on purpose by vlocbench."""
+    """Base class of every error raised on purpose by vlocbench: bad input or data (exit code 1)."""
+
+    exit_code = 1
+
+
+class MachineError(VlocbenchError, RuntimeError):
+    """The machine, not the input, stops it: no OpenGL, a full disk, a folder another run holds
+    (exit code 3)."""
+
+    exit_code = 3
 
 
 class ConfigError(VlocbenchError, ValueError):
@@ -31,7 +40,7 @@ class UnknownNameError(ConfigError, KeyError):
         return self.args[0]
 
 
-class RenderBackendError(VlocbenchError, RuntimeError):
+class RenderBackendError(MachineError):
     """The headless OpenGL backend cannot start (missing libraries, bad MUJOCO_GL)."""
 
 

@@ -8,9 +8,8 @@ z forward). Vehicle frame: x forward, y left, z up, origin at the car's centre o
 from __future__ import annotations
 
 import numpy as np
-from numpy.typing import NDArray
 
-Array = NDArray[np.float64]
+from vlocbench.interfaces import Array
 
 # optical (x right, y down, z forward) from body-style (x forward, y left, z up)
 BODY_FROM_OPTICAL: Array = np.array(
@@ -66,11 +65,6 @@ def pose_error(true_world_from_a: Array, est_world_from_a: Array) -> tuple[float
     position = float(np.linalg.norm(est_world_from_a[:3, 3] - true_world_from_a[:3, 3]))
     cos = (np.trace(true_world_from_a[:3, :3].T @ est_world_from_a[:3, :3]) - 1.0) / 2.0
     return position, float(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
-
-
-def transform_points(a_from_b: Array, points_b: Array) -> Array:
-    """Map (N, 3) points from frame b to frame a."""
-    return points_b @ a_from_b[:3, :3].T + a_from_b[:3, 3]
 
 
 def wrap_angle(angle_rad: float | Array) -> float | Array:

@@ -31,9 +31,20 @@ def synthetic_result(failures: int, queries: int = 4, lock_losses: int = 0) -> E
     n = 50
     t = np.linspace(0, 25, n)
     zero = np.zeros(n)
-    trajectory = Trajectory(t, t * 4, zero, zero, t * 4 + 0.1, zero, zero, zero + 4)
+    trajectory = Trajectory(
+        time_s=t, true_x_m=t * 4, true_y_m=zero, true_yaw_rad=zero, ekf_x_m=t * 4 + 0.1,
+        ekf_y_m=zero, ekf_yaw_rad=zero, speed_mps=zero + 4,
+    )  # fmt: skip
     reinit = tuple(
-        Reinitialization(5.0 * (k + 1), 20.0 * (k + 1), 0.0, "collision", "wall", k, 20.0 * (k + 1))
+        Reinitialization(
+            time_s=5.0 * (k + 1),
+            x_m=20.0 * (k + 1),
+            y_m=0.0,
+            cause="collision",
+            detail="wall",
+            resume_index=k,
+            resume_s_m=20.0 * (k + 1),
+        )
         for k in range(failures)
     )
     locs = tuple(
@@ -61,7 +72,7 @@ def synthetic_result(failures: int, queries: int = 4, lock_losses: int = 0) -> E
         for k in range(queries)
     )
     return EpisodeResult(
-        config_hash="fake",
+        episode_config_hash="fake",
         mode="navigate",
         localizer="fake",
         route_length_m=100.0,
@@ -91,8 +102,11 @@ def _marker(task: EpisodeTask, what: str) -> Path | None:
 
 def run_fake(task: EpisodeTask) -> EpisodeOutcome:
     """Instant episode; a worker dies (``os._exit``) on the first attempt of tasks with a ``die``
-    marker, on every attempt with ``always-die``; ``sleep`` markers slow a task down."""
+    marker, on every attempt with ``always-die``; ``sleep`` markers slow a task down (``sleep-all``
+    every task)."""
     die, always, slow = (_marker(task, w) for w in ("die", "always-die", "sleep"))
+    if slow is not None and not slow.exists():
+        slow = slow.with_name("sleep-all")
     if always is not None and always.exists():
         os._exit(3)
     if die is not None and die.exists():

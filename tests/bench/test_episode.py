@@ -171,9 +171,9 @@ def test_episodes_are_deterministic(sim, path):
     assert [r.x_m for r in a.localizations] == pytest.approx(
         [r.x_m for r in b.localizations], nan_ok=True
     )
-    assert a.config_hash == b.config_hash
+    assert a.episode_config_hash == b.episode_config_hash
     c = run_episode(sim, path, oracle, dataclasses.replace(config, seed=6))
-    assert c.config_hash != a.config_hash
+    assert c.episode_config_hash != a.episode_config_hash
     assert not np.array_equal(a.trajectory.ekf_x_m[:100], c.trajectory.ekf_x_m[:100])
 
 

@@ -1,5 +1,10 @@
 import os
+import signal
 import sqlite3
+import subprocess
+import sys
+import time
+from pathlib import Path
 
 import pytest
 import yaml
@@ -48,6 +53,79 @@ def test_local_pool_retries_the_episode_of_a_dead_worker(tmp_path, control):
     assert rows == {}  # no run was started: rows() lists a run's episodes only
 
 
+_DRIVER = """
+import sys
+from tests.bench.fakes import run_fake
+from tests.bench.test_runner import _fake_tasks
+from vlocbench.bench.runner import execute
+from vlocbench.bench.store import ResultStore
+from vlocbench.cli import _signals_interrupt
+
+with ResultStore(sys.argv[1], "fake") as store, _signals_interrupt():
+    try:
+        execute(_fake_tasks(), store, workers=2, runner=run_fake, progress=False)
+    except KeyboardInterrupt:
+        sys.exit(130)
+"""
+
+
+def _children(pid):
+    """Processes whose parent is ``pid`` (from /proc)."""
+    found = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid:
+            found.append(int(stat.parent.name))
+    return found
+
+
+def _alive(pids):
+    alive = []
+    for pid in pids:
+        try:
+            state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+        except OSError:
+            continue
+        if state != "Z":
+            alive.append(pid)
+    return alive
+
+
+@pytest.mark.parametrize("how", [signal.SIGKILL, signal.SIGTERM, signal.SIGINT])
+def test_a_killed_or_interrupted_run_leaves_no_process_and_a_consistent_store(
+    tmp_path, control, how
+):
+    (control / "sleep-illumination.k=0-sift-vlad-0").write_text("0")  # its two episodes finish
+    (control / "sleep-all").write_text("60")
+    env = {**os.environ, "PYTHONPATH": os.getcwd(), CONTROL_ENV: str(control)}
+    driver = subprocess.Popen(
+        [sys.executable, "-c", _DRIVER, str(tmp_path / "out")], env=env,
+        stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    deadline = time.monotonic() + 60
+    while len(_children(driver.pid)) < 3 and time.monotonic() < deadline:  # 2 workers, tracker
+        time.sleep(0.2)
+    workers = _children(driver.pid)
+    assert len(workers) >= 2, workers
+    while not (tmp_path / "out" / "episodes").exists() and time.monotonic() < deadline:
+        time.sleep(0.2)
+    time.sleep(0.5)
+    driver.send_signal(how)
+    code = driver.wait(timeout=30)
+    assert code == (-signal.SIGKILL if how == signal.SIGKILL else 130), driver.stderr.read()
+    while _alive(workers) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert _alive(workers) == []
+    with ResultStore(tmp_path / "out", "fake") as store:  # the lock is free, the store whole
+        done = store.done_keys()
+        assert len(done) == 2
+        for key in done:
+            assert store.read_table(key, "trajectory")["time_s"].shape == (50,)
+
+
 def test_dask_cluster_on_loopback(tmp_path, control):
     distributed = pytest.importorskip("distributed")
     tasks = _fake_tasks()
@@ -63,6 +141,7 @@ def test_dask_cluster_on_loopback(tmp_path, control):
         assert store.done_keys() == {t.key for t in tasks}
     assert (e.finished, e.errors) == (len(tasks), 0)
     assert e.slots == 2  # the cluster's threads, whatever --workers says
+    assert (e.workers_lost, e.retried) == (1, 1)  # the summary says a worker died
     assert not (control / "die-illumination.k=6-sift-vlad-1").exists()  # it did die, once
 
 
@@ -118,9 +197,7 @@ def tiny(tmp_path_factory):
         "cache": str(root / "cache"),
     }
     (root / "tiny.yaml").write_text(yaml.safe_dump(spec))
-    summary = run_experiment(
-        load_experiment(root / "tiny.yaml"), progress=False, log=lambda s: None
-    )
+    summary = run_experiment(load_experiment(root / "tiny.yaml"), progress=False)
     return root, summary
 
 
@@ -140,15 +217,29 @@ def test_experiment_runs_end_to_end_and_resumes(tiny):
     assert len(recall) == 2 and all(r.metrics["queries"] > 10 for r in recall)
     assert all(r.metrics["recall"][3] > 0.5 for r in recall)  # it localizes on its own map
     assert {r.config["setup"]["conditions"]["illumination"]["k"] for r in recall} == {0.0, 6.0}
-    again = run_experiment(load_experiment(root / "tiny.yaml"), progress=False, log=lambda s: None)
+    again = run_experiment(load_experiment(root / "tiny.yaml"), progress=False)
     assert (again.skipped, again.finished) == (5, 0)
+    # every stored row is strict JSON: SQLite's JSON functions read all of them (the baseline's
+    # metrics have no queries, hence NaN recall and computation time, stored as null)
+    with sqlite3.connect(root / "out" / DB_FILE) as db:
+        valid = db.execute(
+            "SELECT count(*), sum(json_valid(config) AND json_valid(metrics)),"
+            " sum(json_extract(metrics, '$.ct_mean_s') IS NULL) FROM episodes"
+        ).fetchone()
+        assert valid == (5, 5, 1)
+        assert db.execute("SELECT count(*) FROM runs WHERE json_valid(spec)").fetchone() == (1,)
+        kinds = db.execute(
+            "SELECT json_extract(config, '$.kind'), json_extract(metrics, '$.failures_per_km') "
+            "FROM episodes ORDER BY key"
+        ).fetchall()
+        assert {k for k, _ in kinds} == {"recall", "failure", "baseline"}
 
 
 def test_report_of_a_run(tiny):
     from vlocbench.bench.report import write_report
 
     root, _ = tiny
-    files = write_report(root / "out", log=lambda s: None)
+    files = write_report(root / "out")
     md = files.markdown.read_text()
     assert "| sift-vlad |" in md and "| odometry only |" in md and "k=6" in md
     assert "/km) |" in md  # the fused recall with the EKF's lock losses in the ground-truth drive
@@ -168,18 +259,20 @@ def test_cli_run_and_report_errors(tiny, tmp_path, capsys):
     bad = tmp_path / "bad.yaml"
     bad.write_text(yaml.safe_dump({"towns": ["town10"], "methods": ["sift-vlad"],
                                    "sweep": {"weather.fogg": [10]}}))  # fmt: skip
-    assert main(["run", str(bad)]) == 2
+    assert main(["run", str(bad)]) == 1
     assert "valid: fog_model, fog_ramp_m, fog_visual_range_m, overcast, rain, wetness" in (
         capsys.readouterr().err
     )
     other = tmp_path / "other.yaml"
     other.write_text(yaml.safe_dump({"towns": ["town10"], "baseline": True, "recall": False,
                                      "failure": False, "output": str(root / "out")}))  # fmt: skip
-    assert main(["run", str(other), "--no-progress"]) == 2
+    assert main(["run", str(other), "--no-progress"]) == 1
     assert "holds results of experiment 'tiny', not 'other'" in capsys.readouterr().err
-    assert main(["run", str(other), "--workers", "0"]) == 2
-    assert "--workers: must be >= 1, got 0" in capsys.readouterr().err
-    assert main(["report", str(tmp_path / "empty")]) == 2
+    with pytest.raises(SystemExit) as exc:  # a malformed command line: usage, 2
+        main(["run", str(other), "--workers", "0"])
+    assert exc.value.code == 2
+    assert "--workers: must be at least 1, got 0" in capsys.readouterr().err
+    assert main(["report", str(tmp_path / "empty")]) == 1
     assert "holds no vlocbench results" in capsys.readouterr().err
     assert main(["report", str(root / "out"), "--no-examples"]) == 0
     assert "index.html" in capsys.readouterr().out

@@ -7,6 +7,7 @@ import sys
 import textwrap
 import time
 
+import numpy as np
 import pytest
 
 from tests.bench.fakes import synthetic_result
@@ -14,9 +15,14 @@ from vlocbench.bench.store import DB_FILE, EpisodeRow, ResultStore, StoreError
 
 
 def _row(key, status="ok"):
-    return EpisodeRow(key, "failure", "town10", "sift", "k=0", 0, 0, {"a": 1}, status,
-                      None if status == "ok" else "boom", {"failures": 1} if status == "ok" else None,
-                      1.5, 1)  # fmt: skip
+    ok = status == "ok"
+    return EpisodeRow(
+        key=key, kind="failure", town="town10", method="sift", setup="k=0", repetition=0, seed=0,
+        config={"a": 1}, status=status, error=None if ok else "boom",
+        metrics={"failures": 1, "ct_mean_s": float("nan"), "recall": [0.5, float("inf")]}
+        if ok else None,
+        wall_s=1.5, attempts=1,
+    )  # fmt: skip
 
 
 def test_write_read_and_resume_keys(tmp_path):
@@ -27,6 +33,11 @@ def test_write_read_and_resume_keys(tmp_path):
         assert store.done_keys() == {"a"}  # an errored episode runs again
         rows = store.rows()
         assert [(r.key, r.status) for r in rows] == [("a", "ok"), ("b", "error")]
+        # NaN and infinities are stored as null (strict JSON) and read back as NaN
+        assert np.isnan(rows[0].metrics["ct_mean_s"]) and np.isnan(rows[0].metrics["recall"][1])
+        assert store.db.execute(
+            "SELECT json_extract(metrics, '$.ct_mean_s') IS NULL FROM episodes WHERE key='a'"
+        ).fetchone() == (1,)
         traj = store.read_table("a", "trajectory")
         assert traj["true_x_m"].shape == (50,) and traj["ekf_x_m"][0] == pytest.approx(0.1)
         locs = store.read_table("a", "localizations")

@@ -27,6 +27,14 @@ def test_builtin_routes_match_the_papers(name, length_m, turns):
     assert 0 < steps[-1] <= 2.0 + 1e-9
 
 
+def test_a_route_far_from_its_target_length_is_refused():
+    spec = load_town_spec("town10")
+    route = dataclasses.replace(spec.route, target_length_m=800.0)
+    with pytest.raises(ConfigError, match=r"route\.target_length_m: the route's nodes and offsets "
+                                          r"give 489 m, more than 10% off 800"):  # fmt: skip
+        generate_town(dataclasses.replace(spec, route=route))
+
+
 def test_town10_is_repetitive_and_tall():
     t01, t10 = (generate_town(load_town_spec(n)) for n in ("town01", "town10"))
     assert t10.spec.buildings.facade_styles < t01.spec.buildings.facade_styles

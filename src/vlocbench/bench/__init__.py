@@ -1,11 +1,6 @@
 """The benchmark: composes ``sim``, ``nav`` and ``loc`` into episodes, runs and reports."""
 
-from vlocbench.bench.episode import (
-    EpisodeConfig,
-    LatencyConfig,
-    plan_town_route,
-    run_episode,
-)
+from vlocbench.bench.episode import EpisodeConfig, LatencyConfig, run_episode
 from vlocbench.bench.localizer import (
     LocalizationQuery,
     Localizer,
@@ -20,6 +15,7 @@ from vlocbench.bench.records import (
     Segment,
     Trajectory,
 )
+from vlocbench.bench.towns import plan_town_route, route_named, town_named
 
 __all__ = [
     "EpisodeConfig",
@@ -35,5 +31,7 @@ __all__ = [
     "Segment",
     "Trajectory",
     "plan_town_route",
+    "route_named",
     "run_episode",
+    "town_named",
 ]

@@ -16,6 +16,7 @@ a unicycle motion model would mistake for drift. Poses go in and out of the filt
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 from typing import Literal
@@ -31,7 +32,8 @@ from vlocbench.bench.records import (
     Trajectory,
 )
 from vlocbench.config import config_hash, require, require_one_of
-from vlocbench.geometry import Array, planar_pose, pose_error, wrap_angle
+from vlocbench.geometry import planar_pose, pose_error, wrap_angle
+from vlocbench.interfaces import Array
 from vlocbench.nav import (
     ControllerConfig,
     Ekf,
@@ -39,7 +41,6 @@ from vlocbench.nav import (
     Failure,
     FailureConfig,
     FailureDetector,
-    GlobalPlanner,
     LocalPlanner,
     LocalPlannerConfig,
     OdometryNoise,
@@ -51,7 +52,7 @@ from vlocbench.nav import (
     WaypointPath,
     WheelOdometry,
 )
-from vlocbench.sim import Control, Simulator, Town, VehicleState
+from vlocbench.sim import Simulator, VehicleState
 
 # part of every episode key: bump when the same config gives a different result
 # 3: the paper's navigation stack as the default (EKF, local planner, controller, collisions only),
@@ -109,11 +110,6 @@ class EpisodeConfig:
         require_one_of(self.speed_source, ("ekf", "speedometer"), "speed_source")
 
 
-def plan_town_route(town: Town, spacing_m: float = 2.0) -> WaypointPath:
-    """The town's test route as the global planner finds it: start, each leg, goal."""
-    return GlobalPlanner(town.lane_graph, spacing_m).plan(town.route.via_points(town.layout))
-
-
 @dataclass
 class _InFlight:
     """A localization answer on its way to the EKF."""
@@ -134,8 +130,9 @@ class _Columns:
         self.rows.append((t, s.x_m, s.y_m, s.yaw_rad, *ekf, s.speed_mps))
 
     def trajectory(self) -> Trajectory:
-        a = np.asarray(self.rows, dtype=np.float64).reshape(-1, 8)
-        return Trajectory(*(a[:, k].copy() for k in range(8)))
+        names = [f.name for f in dataclasses.fields(Trajectory)]  # the order add() writes
+        a = np.asarray(self.rows, dtype=np.float64).reshape(-1, len(names))
+        return Trajectory(**{name: a[:, k].copy() for k, name in enumerate(names)})
 
 
 def _record(p: _InFlight, fused: bool | None) -> LocalizationRecord:
@@ -277,10 +274,15 @@ class Episode:
         self.segments.append(Segment(self.segment_start_s, self.progress.farthest_s_m))
         self.reinits.append(
             Reinitialization(
-                failure.time_s, failure.x_m, failure.y_m, failure.cause, failure.detail,
-                index, float(self.path.s_m[index]),
+                time_s=failure.time_s,
+                x_m=failure.x_m,
+                y_m=failure.y_m,
+                cause=failure.cause,
+                detail=failure.detail,
+                resume_index=index,
+                resume_s_m=float(self.path.s_m[index]),
             )
-        )  # fmt: skip
+        )
         self.segment_start_s = float(self.path.s_m[index])
         self._restart_at(index, t)
 
@@ -324,7 +326,7 @@ class Episode:
                 x, y, yaw, speed = state.x_m, state.y_m, state.yaw_rad, state.speed_mps
             target = self.planner.step(np.array([x, y]), speed)
             cmd = self.controller.step(x, y, yaw, speed, target.xy, target.remaining_m)
-            result = self.sim.step(Control(cmd.throttle, cmd.steer, cmd.brake))
+            result = self.sim.step(cmd)
             step += 1
             t = step * self.dt_s
             new = result.state
@@ -352,7 +354,7 @@ class Episode:
         end = self.sim.state
         ex, ey, _ = self._ekf_pose()
         return EpisodeResult(
-            config_hash=config_hash(c),
+            episode_config_hash=config_hash(c),
             mode=c.mode,
             localizer="odometry" if self.localizer is None else self.localizer.name,
             route_length_m=self.path.length_m,

@@ -16,7 +16,7 @@ from vlocbench.nav import (
     VehicleController,
     WaypointPath,
 )
-from vlocbench.sim import Camera, Control, Simulator
+from vlocbench.sim import Camera, Simulator
 
 
 def capture_gallery(
@@ -51,7 +51,7 @@ def capture_gallery(
                 progress(shots)
         target = planner.step(np.array([s.x_m, s.y_m]), s.speed_mps)
         cmd = controller.step(s.x_m, s.y_m, s.yaw_rad, s.speed_mps, target.xy, target.remaining_m)
-        new = sim.step(Control(cmd.throttle, cmd.steer, cmd.brake)).state
+        new = sim.step(cmd).state
         travelled_m += float(np.hypot(new.x_m - s.x_m, new.y_m - s.y_m))
         tracker.update(np.array([new.x_m, new.y_m]))
     return writer.close()

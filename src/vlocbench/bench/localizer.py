@@ -13,7 +13,8 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 
 from vlocbench.config import require
-from vlocbench.geometry import Array, planar_pose
+from vlocbench.geometry import planar_pose
+from vlocbench.interfaces import Array
 from vlocbench.sim import Camera, Frame
 
 

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from vlocbench.geometry import Array
+from vlocbench.interfaces import Array
 
 
 def per_km(count: float, covered_m: float) -> float:
@@ -48,7 +48,7 @@ class LocalizationRecord:
     reason: str
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Reinitialization:
     """A navigation failure and where the car was put back.
 
@@ -77,7 +77,7 @@ class Segment:
         return self.end_s_m - self.start_s_m
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Trajectory:
     """Per-step columns, all (N,): time, true pose, EKF pose, true speed."""
 
@@ -95,7 +95,7 @@ class Trajectory:
         return np.hypot(self.ekf_x_m - self.true_x_m, self.ekf_y_m - self.true_y_m)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class EpisodeResult:
     """One drive of a route. Distances in metres, times in seconds (simulated unless ``wall``).
 
@@ -104,7 +104,7 @@ class EpisodeResult:
     waypoint reached), never by the whole route.
     """
 
-    config_hash: str
+    episode_config_hash: str  # config.config_hash of the EpisodeConfig it ran with
     mode: str
     localizer: str
     route_length_m: float

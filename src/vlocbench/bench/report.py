@@ -14,7 +14,8 @@ from __future__ import annotations
 
 import base64
 import html
-from collections.abc import Callable, Sequence
+import logging
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
@@ -41,6 +42,9 @@ class ReportFiles:
     latex: Path
     figures: tuple[Path, ...]
     summary: Summary
+
+
+logger = logging.getLogger(__name__)
 
 
 # -- tables ---------------------------------------------------------------------------------------
@@ -455,11 +459,11 @@ def example_images(
     along the route: what the localizer sees against what the map was built from."""
     import cv2
 
-    from vlocbench.bench.runner import _route, _town
+    from vlocbench.bench.towns import route_named, town_named
     from vlocbench.sim import Simulator
 
     spec = summary.spec
-    route = _route(town, spec.route_length_m)
+    route = route_named(town, spec.route_length_m)
     j = len(route) // 3
     pose = (float(route.xy[j, 0]), float(route.xy[j, 1]), float(route.yaw_rad[j]))
 
@@ -471,14 +475,14 @@ def example_images(
         )[1].tobytes()
 
     out = []
-    sim = Simulator(_town(town), spec.gallery.conditions)
+    sim = Simulator(town_named(town), spec.gallery.conditions)
     try:
         sim.teleport(*pose)
         gallery_view = jpeg(sim.render([spec.gallery.camera])[0].image)
         for s in summary.setups:
             if s.conditions.traffic != sim.conditions.traffic:
                 sim.close()
-                sim = Simulator(_town(town), s.conditions)
+                sim = Simulator(town_named(town), s.conditions)
             else:
                 sim.set_conditions(s.conditions)
             sim.teleport(*pose)
@@ -510,11 +514,9 @@ th{background:#f3f3f3}td:first-child{text-align:left}img{max-width:100%}figure{d
 figcaption{font-size:12px;color:#555}.err{color:#b00}pre{background:#f7f7f7;padding:.5em;font-size:12px;overflow-x:auto}"""
 
 
-def write_report(
-    output_dir: str | Path, examples: bool = True, log: Callable[[str], None] = print
-) -> ReportFiles:
+def write_report(output_dir: str | Path, examples: bool = True) -> ReportFiles:
     """Write the tables, figures and the HTML page of the latest run in ``output_dir``."""
-    from vlocbench.bench.runner import _town
+    from vlocbench.bench.towns import town_named
 
     stored, rows = read_latest_run(output_dir)
     summary = summarize(spec_from_stored(stored), rows)
@@ -534,7 +536,7 @@ def write_report(
         name = summary.town_names[town]
         figures.append(failure_figure(summary, town, out / f"failure_rate_{name}.png"))
         figures.append(
-            crash_sites_figure(summary, town, _town(town), out / f"failure_sites_{name}.png")
+            crash_sites_figure(summary, town, town_named(town), out / f"failure_sites_{name}.png")
         )
     if summary.spec.methods:
         if summary.spec.recall and summary.spec.failure:
@@ -557,7 +559,7 @@ def write_report(
     if examples:
         parts.append("<h2>Query images and the gallery view from the same pose</h2>")
         for town in summary.towns:
-            log(f"report: rendering example images of {summary.town_names[town]}")
+            logger.info(f"report: rendering example images of {summary.town_names[town]}")
             for label, query, gallery in example_images(summary, town):
                 parts.append(
                     f"<div><h4>{html.escape(summary.town_names[town])}: {html.escape(label)}</h4>"

@@ -10,32 +10,33 @@ map load. A worker process that dies (a crash, the OOM killer) has its episode r
 from __future__ import annotations
 
 import concurrent.futures as cf
+import logging
 import multiprocessing
 import os
+import signal
+import threading
 import time
 import traceback
 from collections import deque
 from collections.abc import Callable, Iterable
 from dataclasses import asdict, dataclass
-from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
-from vlocbench.bench.episode import plan_town_route, run_episode
+from vlocbench.bench.episode import run_episode
 from vlocbench.bench.experiment import EpisodeTask, ExperimentSpec, expand, gallery_key, setups
 from vlocbench.bench.gallery_capture import capture_gallery
 from vlocbench.bench.metrics import episode_metrics
 from vlocbench.bench.records import EpisodeResult
 from vlocbench.bench.store import EpisodeRow, ResultStore
+from vlocbench.bench.towns import route_named, town_named
 from vlocbench.config import to_dict
 from vlocbench.errors import ConfigError
 from vlocbench.loc.gallery import GALLERY_FILE, Gallery
 from vlocbench.loc.mapping import MAP_FILE, build_map, default_map_dir
-from vlocbench.nav import WaypointPath
 from vlocbench.sim import Simulator
-from vlocbench.sim.town import Town, generate_town, load_town_spec
 
-Log = Callable[[str], None]
+logger = logging.getLogger(__name__)
 CONNECT_TIMEOUT_S = 10  # to a Dask scheduler
 
 
@@ -46,20 +47,22 @@ class EpisodeOutcome:
     wall_s: float  # in the worker, town and map loading included
 
 
-@dataclass(frozen=True)
-class Execution:
-    """What :func:`execute` did: episodes finished, ended in an error and rerun after their worker
-    died; seconds in episodes (summed over workers) and writing; the most episodes at once."""
+@dataclass
+class Tally:
+    """What :func:`execute` did, counted as it goes: episodes finished, ended in an error, and run
+    again after their worker died (by us, or by Dask on another worker); workers lost; seconds in
+    episodes (summed over workers) and writing results; the most episodes at once."""
 
-    finished: int
-    errors: int
-    retried: int
-    episode_s: float
-    store_s: float
-    slots: int
+    finished: int = 0
+    errors: int = 0
+    retried: int = 0
+    workers_lost: int = 0
+    episode_s: float = 0.0
+    store_s: float = 0.0
+    slots: int = 1
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class RunSummary:
     output_dir: Path
     total: int
@@ -67,6 +70,7 @@ class RunSummary:
     finished: int
     errors: int
     retried: int  # episodes rerun after their worker died
+    workers_lost: int  # worker processes that died during the run
     wall_s: float  # the whole run, galleries and maps included
     episodes_wall_s: float  # the episode phase
     episode_s: float  # the sum of the episodes' times in their workers
@@ -74,10 +78,13 @@ class RunSummary:
     slots: int  # episodes that could run at once: local workers, or the Dask cluster's threads
 
     @property
-    def harness_overhead(self) -> float:
+    def harness_overhead(self) -> float | None:
         """Episode-phase time beyond the workers' episode time, as a fraction of the latter
-        (storing, scheduling, transfers, idle workers at the end)."""
+        (storing, scheduling, transfers, idle workers at the end); None when a worker died, as the
+        work lost with it and the smaller pool after it make the figure meaningless."""
         busy = self.episode_s / self.slots
+        if self.workers_lost:
+            return None
         return 0.0 if busy <= 0 else max(0.0, self.episodes_wall_s / busy - 1)
 
     @property
@@ -87,17 +94,6 @@ class RunSummary:
 
 
 # -- the worker side ------------------------------------------------------------------------------
-@lru_cache(maxsize=4)
-def _town(name: str) -> Town:
-    return generate_town(load_town_spec(name))
-
-
-@lru_cache(maxsize=4)
-def _route(name: str, length_m: float = 0.0) -> WaypointPath:
-    """The town's route, cut after its first ``length_m`` metres when that is > 0."""
-    return plan_town_route(_town(name)).head(length_m)
-
-
 _SIM: dict[tuple[str, Any], Simulator] = {}
 _LOCALIZER: dict[Any, Any] = {}
 
@@ -110,7 +106,7 @@ def _simulator(task: EpisodeTask) -> Simulator:
         for old in list(_SIM):
             if old[0] == task.town:  # keep one scene per town in memory
                 _SIM.pop(old).close()
-        sim = _SIM[key] = Simulator(_town(task.town), task.setup.conditions)
+        sim = _SIM[key] = Simulator(town_named(task.town), task.setup.conditions)
     else:
         sim.set_conditions(task.setup.conditions)
     return sim
@@ -136,7 +132,7 @@ def run_task(task: EpisodeTask) -> EpisodeOutcome:
     t = time.perf_counter()
     localizer = _localizer(task)
     result = run_episode(
-        _simulator(task), _route(task.town, task.route_length_m), localizer, task.episode
+        _simulator(task), route_named(task.town, task.route_length_m), localizer, task.episode
     )
     return EpisodeOutcome(task.key, result, time.perf_counter() - t)
 
@@ -145,38 +141,88 @@ def _worker_init() -> None:
     # one process per core: OpenMP threads spinning against each other make torch crawl. Set
     # before torch is imported (by the first localizer), which reads it then.
     os.environ["OMP_NUM_THREADS"] = "1"
+    # Ctrl-C reaches the whole process group: the driver alone handles it (it stops the workers)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    threading.Thread(target=_exit_with_parent, args=(os.getppid(),), daemon=True).start()
+
+
+def _exit_with_parent(parent_pid: int, period_s: float = 1.0) -> None:
+    """A pool worker's watchdog: a driver killed outright (``kill -9``) cannot stop its workers,
+    so each stops itself once it has been handed to another parent."""
+    while os.getppid() == parent_pid:
+        time.sleep(period_s)
+    os._exit(1)
 
 
 # -- the driver side ------------------------------------------------------------------------------
-def prepare_maps(spec: ExperimentSpec, log: Log = print) -> dict[tuple[str, str], str]:
+class _StageBars:
+    """One tqdm bar per preparation stage (gallery images, features, matches), updated by the
+    stages' progress callbacks; nothing when disabled."""
+
+    def __init__(self, enabled: bool) -> None:
+        self.enabled = enabled
+        self.bars: dict[str, Any] = {}
+
+    def __call__(self, stage: str, done: int, total: int) -> None:
+        if not self.enabled:
+            return
+        if stage not in self.bars:
+            from tqdm import tqdm
+
+            self.bars[stage] = tqdm(total=total, desc=stage, unit="image", dynamic_ncols=True)
+        bar = self.bars[stage]
+        bar.update(done - bar.n)
+
+    def close(self) -> None:
+        for bar in self.bars.values():
+            bar.close()
+        self.bars.clear()
+
+
+def prepare_maps(spec: ExperimentSpec, progress: bool = False) -> dict[tuple[str, str], str]:
     """Capture each town's gallery and build each method's map, unless the cache has them."""
     cache = Path(spec.cache).resolve()
     out: dict[tuple[str, str], str] = {}
     if not (spec.recall or spec.failure):
         return out
-    for town_name in spec.towns:
-        town = _town(town_name)
-        gallery_dir = cache / "galleries" / f"{town.name}-{gallery_key(town_name, spec)}"
-        if not (gallery_dir / GALLERY_FILE).exists():
-            log(f"{town.name}: capturing the gallery in {gallery_dir}")
-            t = time.perf_counter()
-            sim = Simulator(town, spec.gallery.conditions)
-            try:
-                route = _route(town_name, spec.route_length_m)
-                capture_gallery(sim, route, (spec.gallery.camera,), gallery_dir,
-                                spec.gallery.spacing_m, spec.gallery.speed_mps)  # fmt: skip
-            finally:
-                sim.close()
-            log(f"{town.name}: gallery captured in {time.perf_counter() - t:.0f} s")
-        gallery = Gallery.load(gallery_dir)
-        for method in spec.methods:
-            mapping = method.mapping or spec.mapping
-            map_dir = default_map_dir(cache / "maps", gallery, method.name, method.conf, mapping)
-            if not (map_dir / MAP_FILE).exists():
-                log(f"{town.name}: building the {method.name} map in {map_dir}")
-            report = build_map(gallery, method.conf, map_dir, mapping)
-            log(f"{town.name}: {method.name} map: {report.images} images, {report.points} points")
-            out[(town_name, method.name)] = str(map_dir)
+    bars = _StageBars(progress)
+    try:
+        for town_name in spec.towns:
+            out.update(_prepare_town(spec, town_name, cache, bars))
+    finally:
+        bars.close()
+    return out
+
+
+def _prepare_town(spec: ExperimentSpec, town_name: str, cache: Path,
+                  bars: _StageBars) -> dict[tuple[str, str], str]:  # fmt: skip
+    town = town_named(town_name)
+    gallery_dir = cache / "galleries" / f"{town.name}-{gallery_key(town_name, spec)}"
+    if not (gallery_dir / GALLERY_FILE).exists():
+        logger.info(f"{town.name}: capturing the gallery in {gallery_dir}")
+        t = time.perf_counter()
+        route = route_named(town_name, spec.route_length_m)
+        shots = int(route.length_m / spec.gallery.spacing_m) + 1
+        with Simulator(town, spec.gallery.conditions) as sim:
+            capture_gallery(sim, route, (spec.gallery.camera,), gallery_dir,
+                            spec.gallery.spacing_m, spec.gallery.speed_mps,
+                            progress=lambda n: bars(f"{town.name} gallery", n, shots))  # fmt: skip
+        logger.info(f"{town.name}: gallery captured in {time.perf_counter() - t:.0f} s")
+    gallery = Gallery.load(gallery_dir)
+    out = {}
+    for method in spec.methods:
+        mapping = method.mapping or spec.mapping
+        map_dir = default_map_dir(cache / "maps", gallery, method.name, method.conf, mapping)
+        if not (map_dir / MAP_FILE).exists():
+            logger.info(f"{town.name}: building the {method.name} map in {map_dir}")
+        label = f"{town.name} {method.name}"
+        report = build_map(gallery, method.conf, map_dir, mapping,
+                           progress=lambda stage, done, total, label=label: bars(
+                               f"{label} {stage}", done, total))  # fmt: skip
+        logger.info(
+            f"{town.name}: {method.name} map: {report.images} images, {report.points} points"
+        )
+        out[(town_name, method.name)] = str(map_dir)
     return out
 
 
@@ -193,28 +239,54 @@ def _row(task: EpisodeTask, outcome: EpisodeOutcome | None, error: str | None,
         "method": to_dict(task.method) if task.method else None,
         "map_dir": task.map_dir,
         "episode": to_dict(task.episode),
-        "config_hash": task.key,
+        "key": task.key,
     }
     metrics = asdict(episode_metrics(outcome.result)) if outcome else None
     return EpisodeRow(
-        task.key, task.kind, _town(task.town).name, task.method_name, task.setup.label, task.repetition,
-        task.episode.seed, config, "ok" if outcome else "error", error, metrics,
-        outcome.wall_s if outcome else None, attempts,
-    )  # fmt: skip
+        key=task.key,
+        kind=task.kind,
+        town=town_named(task.town).name,
+        method=task.method_name,
+        setup=task.setup.label,
+        repetition=task.repetition,
+        seed=task.episode.seed,
+        config=config,
+        status="ok" if outcome else "error",
+        error=error,
+        metrics=metrics,
+        wall_s=outcome.wall_s if outcome else None,
+        attempts=attempts,
+    )
 
 
-class _Progress:
-    def __init__(self, total: int, enabled: bool) -> None:
+class _Recorder:
+    """Writes each episode's outcome to the store as it arrives, counts it, advances the bar."""
+
+    def __init__(self, store: ResultStore, tally: Tally, total: int, progress: bool) -> None:
+        self.store, self.tally = store, tally
         self.bar = None
-        if enabled and total:
+        if progress and total:
             from tqdm import tqdm
 
             self.bar = tqdm(total=total, unit="episode", dynamic_ncols=True)
 
-    def update(self, ok: int, errors: int, task: EpisodeTask) -> None:
+    def __call__(self, task: EpisodeTask, outcome: EpisodeOutcome | None, error: str | None,
+                 attempts: int) -> None:  # fmt: skip
+        t = time.perf_counter()
+        self.store.write_episode(_row(task, outcome, error, attempts),
+                                 outcome.result if outcome else None)  # fmt: skip
+        self.tally.store_s += time.perf_counter() - t
+        if outcome:
+            self.tally.finished += 1
+            self.tally.episode_s += outcome.wall_s
+        else:
+            self.tally.errors += 1
         if self.bar is not None:
-            self.bar.set_postfix_str(f"ok {ok} err {errors} | {task.town} {task.method_name} "
-                                     f"{task.kind}", refresh=False)  # fmt: skip
+            self.bar.set_postfix_str(
+                f"ok {self.tally.finished} err {self.tally.errors} | {task.town} "
+                f"{task.method_name} {task.kind}",
+                refresh=False,
+            )
             self.bar.update(1)
 
     def close(self) -> None:
@@ -222,10 +294,7 @@ class _Progress:
             self.bar.close()
 
 
-def _local_pool(workers: int) -> cf.Executor:
-    return cf.ProcessPoolExecutor(
-        workers, mp_context=multiprocessing.get_context("spawn"), initializer=_worker_init
-    )
+Runner = Callable[[EpisodeTask], EpisodeOutcome]
 
 
 def execute(
@@ -233,96 +302,168 @@ def execute(
     store: ResultStore,
     workers: int = 1,
     scheduler: str | None = None,
-    runner: Callable[[EpisodeTask], EpisodeOutcome] = run_task,
+    runner: Runner = run_task,
     max_attempts: int = 3,
     progress: bool = True,
-) -> Execution:
+) -> Tally:
     """Run ``tasks``, writing each outcome as it arrives.
 
     ``workers == 1`` without a scheduler runs in this process. Otherwise at most one episode per
     worker is in flight, so a worker that dies takes only the episodes in flight with it: they are
-    run again (up to ``max_attempts`` in all) on a fresh pool; Dask reschedules them itself.
+    run again (up to ``max_attempts`` in all) on a fresh pool; Dask reschedules them itself. An
+    interruption (Ctrl-C, SIGTERM, a store error) stops every worker of a local pool before it
+    propagates; what was stored stays stored.
     """
     _check_workers(workers)
-    bar = _Progress(len(tasks), progress)
-    finished = errors = retried = 0
-    episode_s = store_s = 0.0
-    slots = workers
-
-    def record(task: EpisodeTask, outcome: EpisodeOutcome | None, error: str | None,
-               attempts: int) -> None:  # fmt: skip
-        nonlocal finished, errors, episode_s, store_s
-        t = time.perf_counter()
-        store.write_episode(_row(task, outcome, error, attempts),
-                            outcome.result if outcome else None)  # fmt: skip
-        store_s += time.perf_counter() - t
-        if outcome:
-            finished += 1
-            episode_s += outcome.wall_s
-        else:
-            errors += 1
-        bar.update(finished, errors, task)
-
+    tally = Tally(slots=workers)
+    record = _Recorder(store, tally, len(tasks), progress)
     try:
-        if scheduler is None and workers == 1:
-            for task in tasks:
+        if scheduler is not None:
+            _run_on_dask(tasks, scheduler, runner, record, tally)
+        elif workers == 1:
+            _run_inline(tasks, runner, record)
+        else:
+            _run_on_pool(tasks, workers, runner, record, tally, max_attempts)
+    finally:
+        record.close()
+    return tally
+
+
+def _run_inline(tasks: list[EpisodeTask], runner: Runner, record: _Recorder) -> None:
+    for task in tasks:
+        try:
+            outcome = runner(task)
+        except Exception:  # an episode's bug must not end the run: record it
+            record(task, None, traceback.format_exc(limit=8), 1)
+            continue
+        record(task, outcome, None, 1)
+
+
+def _local_pool(workers: int) -> cf.ProcessPoolExecutor:
+    return cf.ProcessPoolExecutor(
+        workers, mp_context=multiprocessing.get_context("spawn"), initializer=_worker_init
+    )
+
+
+def _run_on_pool(tasks: list[EpisodeTask], workers: int, runner: Runner, record: _Recorder,
+                 tally: Tally, max_attempts: int) -> None:  # fmt: skip
+    """Local worker processes; a pool broken by a dead worker is replaced, and the episodes that
+    were in flight in it run again."""
+    attempts = dict.fromkeys((t.key for t in tasks), 0)
+    pending = deque(tasks)
+    while pending:
+        lost = _pool_round(pending, workers, runner, record, attempts)
+        if lost:
+            tally.workers_lost += 1
+        for task in lost:
+            if attempts[task.key] < max_attempts:
+                pending.appendleft(task)
+                tally.retried += 1
+            else:
+                record(task, None, "its worker process died", attempts[task.key])
+
+
+def _pool_round(pending: deque[EpisodeTask], workers: int, runner: Runner, record: _Recorder,
+                attempts: dict[str, int]) -> list[EpisodeTask]:  # fmt: skip
+    """Run ``pending`` on one pool until it is empty or the pool breaks; returns the episodes
+    that were in flight when it broke."""
+    pool = _local_pool(workers)
+    running: dict[cf.Future, EpisodeTask] = {}
+    lost: list[EpisodeTask] = []
+    try:
+        while (pending or running) and not lost:
+            while pending and len(running) < workers:
+                task = pending.popleft()
+                attempts[task.key] += 1
+                running[pool.submit(runner, task)] = task
+            done, _ = cf.wait(running, return_when=cf.FIRST_COMPLETED)
+            for future in done:
+                task = running.pop(future)
                 try:
-                    outcome = runner(task)
-                except Exception:  # an episode's bug must not end the run: record it
-                    record(task, None, traceback.format_exc(limit=8), 1)
+                    outcome = future.result()
+                except cf.process.BrokenProcessPool:
+                    lost.append(task)
+                    continue
+                except Exception as exc:
+                    record(task, None, _describe(exc), attempts[task.key])
+                    continue
+                record(task, outcome, None, attempts[task.key])
+        # a broken pool: everything still in flight died with it
+        return [*lost, *running.values()] if lost else []
+    finally:
+        if running or lost:  # interrupted or broken: don't wait for workers
+            _kill_workers(pool)
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _kill_workers(pool: cf.ProcessPoolExecutor) -> None:
+    # the executor has no public way to stop workers in the middle of an episode
+    for process in list(getattr(pool, "_processes", {}).values()):
+        process.kill()
+
+
+def _run_on_dask(tasks: list[EpisodeTask], scheduler: str, runner: Runner, record: _Recorder,
+                 tally: Tally, poll_s: float = 1.0) -> None:  # fmt: skip
+    """A Dask cluster: twice as many episodes in flight as it has threads, so that its workers
+    stay fed. Dask reruns the episodes of a worker that dies (giving up with ``KilledWorker``);
+    the scheduler's count of episodes caught in a worker's death and the workers that vanished
+    go into the tally."""
+    client = _dask_client(scheduler)
+    try:
+        tally.slots = sum(client.nthreads().values()) or 1
+        window = 2 * tally.slots
+        pending = deque(tasks)
+        running: dict[Any, EpisodeTask] = {}
+        seen = set(client.scheduler_info()["workers"])
+        prefix, suspicious_before = None, 0
+        while pending or running:
+            while pending and len(running) < window:
+                task = pending.popleft()
+                future = client.submit(runner, task, pure=False)
+                running[future] = task
+                if prefix is None:
+                    from dask.utils import key_split
+
+                    prefix = key_split(future.key)
+                    suspicious_before = _dask_suspicious(client, prefix)
+            done = _dask_wait(list(running), poll_s)
+            now = set(client.scheduler_info()["workers"])
+            tally.workers_lost += len(seen - now)
+            seen = now
+            if done and prefix is not None:  # before the results are released
+                tally.retried = _dask_suspicious(client, prefix) - suspicious_before
+            for future in done:
+                task = running.pop(future)
+                try:
+                    outcome = future.result()
+                except Exception as exc:
+                    record(task, None, _describe(exc), 1)
                     continue
                 record(task, outcome, None, 1)
-            return Execution(finished, errors, retried, episode_s, store_s, slots)
-        attempts = dict.fromkeys((t.key for t in tasks), 0)
-        pending = deque(tasks)
-        while pending:
-            executor, client, slots = _executor(workers, scheduler)
-            window = slots if client is None else 2 * slots  # Dask: keep its workers fed
-            running: dict[cf.Future, EpisodeTask] = {}
-            lost: list[EpisodeTask] = []
-            interrupted = True  # until the loop ends normally (Ctrl-C, a store error)
-            try:
-                while pending or running:
-                    while pending and len(running) < window:
-                        task = pending.popleft()
-                        attempts[task.key] += 1
-                        running[executor.submit(runner, task)] = task
-                    done, _ = cf.wait(running, return_when=cf.FIRST_COMPLETED)
-                    for future in done:
-                        task = running.pop(future)
-                        try:
-                            outcome = future.result()
-                        except cf.process.BrokenProcessPool:
-                            lost.append(task)
-                            continue
-                        except Exception as exc:
-                            record(task, None, _describe(exc), attempts[task.key])
-                            continue
-                        record(task, outcome, None, attempts[task.key])
-                    if lost:  # the pool is broken: everything in flight died with it
-                        lost += running.values()
-                        running = {}
-                        for task in lost:
-                            if attempts[task.key] < max_attempts:
-                                pending.appendleft(task)
-                                retried += 1
-                            else:
-                                record(task, None, "its worker process died", attempts[task.key])
-                        break
-                interrupted = False
-            finally:
-                if client is None:
-                    if lost or interrupted:  # don't wait for workers that are dead or not needed
-                        for process in list(getattr(executor, "_processes", {}).values()):
-                            process.kill()
-                    executor.shutdown(wait=True, cancel_futures=True)
-                else:
-                    for future in running:
-                        future.cancel()
-                    client.close()
-        return Execution(finished, errors, retried, episode_s, store_s, slots)
+        for future in running:
+            future.cancel()
     finally:
-        bar.close()
+        client.close()
+
+
+def _dask_wait(futures: list[Any], timeout_s: float) -> list[Any]:
+    from distributed import wait
+
+    try:
+        done, _ = wait(futures, timeout=timeout_s, return_when="FIRST_COMPLETED")
+    except TimeoutError:
+        return []
+    return list(done)
+
+
+def _dask_suspicious(client: Any, prefix: str) -> int:
+    """How many times the scheduler saw tasks of ``prefix`` on a worker that died."""
+
+    def count(dask_scheduler: Any) -> int:
+        tp = dask_scheduler.task_prefixes.get(prefix)
+        return 0 if tp is None else int(tp.suspicious)
+
+    return int(client.run_on_scheduler(count))
 
 
 def _check_workers(workers: int) -> None:
@@ -336,10 +477,7 @@ def _describe(exc: BaseException) -> str:
     return "".join(traceback.format_exception(exc, limit=8))
 
 
-def _executor(workers: int, scheduler: str | None) -> tuple[cf.Executor, Any, int]:
-    """The executor, its Dask client (or None) and how many episodes it runs at once."""
-    if scheduler is None:
-        return _local_pool(workers), None, workers
+def _dask_client(scheduler: str) -> Any:
     try:
         from distributed import Client
     except ImportError:
@@ -347,11 +485,9 @@ def _executor(workers: int, scheduler: str | None) -> tuple[cf.Executor, Any, in
             "--scheduler", "Dask is not installed: pip install 'vlocbench[dask]'"
         ) from None
     try:
-        client = Client(scheduler, timeout=f"{CONNECT_TIMEOUT_S}s")
+        return Client(scheduler, timeout=f"{CONNECT_TIMEOUT_S}s")
     except OSError as exc:
         raise ConfigError("--scheduler", f"cannot reach {scheduler}: {exc}") from None
-    threads = sum(client.nthreads().values()) or workers
-    return client.get_executor(pure=False), client, threads
 
 
 def run_experiment(
@@ -359,28 +495,37 @@ def run_experiment(
     workers: int = 1,
     scheduler: str | None = None,
     progress: bool = True,
-    log: Log = print,
-    runner: Callable[[EpisodeTask], EpisodeOutcome] = run_task,
+    runner: Runner = run_task,
 ) -> RunSummary:
     """Run what the store of ``spec.output_dir`` does not have yet; returns the counts."""
     _check_workers(workers)  # before hours of gallery and map building, not after
     t0 = time.perf_counter()
     with ResultStore(spec.output_dir, spec.name) as store:
-        maps = prepare_maps(spec, log)
+        maps = prepare_maps(spec, progress)
         tasks = expand(spec, maps)
         store.start_run(spec.spec_hash, to_dict(spec), [t.key for t in tasks])
         done = store.done_keys()
         todo = [t for t in tasks if t.key not in done]
-        log(
+        logger.info(
             f"{spec.name}: {len(tasks)} episodes over {len(setups(spec))} setup(s); "
             f"{len(tasks) - len(todo)} already done, {len(todo)} to run"
         )
         t1 = time.perf_counter()
         e = execute(_order(todo), store, workers, scheduler, runner, progress=progress)
         return RunSummary(
-            spec.output_dir, len(tasks), len(tasks) - len(todo), e.finished, e.errors, e.retried,
-            time.perf_counter() - t0, time.perf_counter() - t1, e.episode_s, e.store_s, e.slots,
-        )  # fmt: skip
+            output_dir=spec.output_dir,
+            total=len(tasks),
+            skipped=len(tasks) - len(todo),
+            finished=e.finished,
+            errors=e.errors,
+            retried=e.retried,
+            workers_lost=e.workers_lost,
+            wall_s=time.perf_counter() - t0,
+            episodes_wall_s=time.perf_counter() - t1,
+            episode_s=e.episode_s,
+            store_s=e.store_s,
+            slots=e.slots,
+        )
 
 
 def _order(tasks: Iterable[EpisodeTask]) -> list[EpisodeTask]:

@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 
 from vlocbench.bench.records import EpisodeResult
-from vlocbench.errors import VlocbenchError
+from vlocbench.errors import MachineError, VlocbenchError
 
 DB_FILE = "results.sqlite"
 LOCK_FILE = ".lock"
@@ -53,10 +53,14 @@ CREATE TABLE IF NOT EXISTS run_episodes (
 
 
 class StoreError(VlocbenchError, RuntimeError):
-    """The output folder cannot take these results (another experiment, in use, disk full)."""
+    """The output folder cannot take or give these results (another experiment's, not a store)."""
 
 
-@dataclass(frozen=True)
+class StoreUnavailableError(StoreError, MachineError):
+    """The machine stops the store: the folder cannot be written, is full or another run holds it."""
+
+
+@dataclass(frozen=True, kw_only=True)
 class EpisodeRow:
     key: str
     kind: str
@@ -73,18 +77,45 @@ class EpisodeRow:
     attempts: int
 
 
-def _episode_row(*columns: Any) -> EpisodeRow:
-    """An ``episodes`` table row (in schema order) as an EpisodeRow."""
-    *head, config, status, error, metrics, wall_s, attempts, _finished = columns
+def strict_json(value: Any) -> str:
+    """``value`` as strict JSON (keys sorted): NaN and infinities become null, so that SQLite's
+    ``json_extract``, DuckDB and other JSON readers accept every stored row."""
+    return json.dumps(_finite(value), sort_keys=True, allow_nan=False)
+
+
+def _finite(value: Any) -> Any:
+    if isinstance(value, float):
+        return value if np.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_finite(v) for v in value]
+    return value
+
+
+def _nan_for_null(value: Any) -> Any:
+    """Metrics hold only numbers, flags and names: a null in them was a NaN (see strict_json)."""
+    if value is None:
+        return float("nan")
+    if isinstance(value, dict):
+        return {k: _nan_for_null(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_nan_for_null(v) for v in value]
+    return value
+
+
+def _episode_row(
+    key: str, kind: str, town: str, method: str, setup: str, repetition: int, seed: int,
+    config: str, status: str, error: str | None, metrics: str | None, wall_s: float | None,
+    attempts: int, finished: float,
+) -> EpisodeRow:  # fmt: skip
+    """An ``episodes`` table row (its columns in schema order) as an EpisodeRow."""
     return EpisodeRow(
-        *head,
-        config=json.loads(config),
-        status=status,
-        error=error,
-        metrics=json.loads(metrics) if metrics else None,
-        wall_s=wall_s,
+        key=key, kind=kind, town=town, method=method, setup=setup, repetition=repetition,
+        seed=seed, config=json.loads(config), status=status, error=error,
+        metrics=_nan_for_null(json.loads(metrics)) if metrics else None, wall_s=wall_s,
         attempts=attempts,
-    )
+    )  # fmt: skip
 
 
 def _latest_run(db: sqlite3.Connection) -> tuple[str, str] | None:
@@ -145,12 +176,14 @@ class ResultStore:
             self.root.mkdir(parents=True, exist_ok=True)
             self._lock = open(self.root / LOCK_FILE, "w")  # held until close()
         except OSError as exc:
-            raise StoreError(f"cannot use {self.root} as an output folder: {exc}") from None
+            raise StoreUnavailableError(
+                f"cannot use {self.root} as an output folder: {exc}"
+            ) from None
         try:
             fcntl.flock(self._lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
             self._lock.close()
-            raise StoreError(f"{self.root} is in use by another vlocbench run") from None
+            raise StoreUnavailableError(f"{self.root} is in use by another vlocbench run") from None
         try:
             self.db = sqlite3.connect(self.root / DB_FILE, isolation_level=None)
             self.db.execute("PRAGMA journal_mode=WAL")
@@ -200,7 +233,7 @@ class ResultStore:
         except sqlite3.OperationalError as exc:
             if db.in_transaction:
                 db.execute("ROLLBACK")
-            raise StoreError(f"could not write {what} to {self.root}: {exc}") from None
+            raise StoreUnavailableError(f"could not write {what} to {self.root}: {exc}") from None
 
     def start_run(self, run_hash: str, spec: dict[str, Any], keys: list[str]) -> None:
         """Record a run (its resolved spec) and the episodes it consists of."""
@@ -208,7 +241,7 @@ class ResultStore:
             db.execute(
                 "INSERT INTO runs VALUES (?, ?, ?) "
                 "ON CONFLICT(run_hash) DO UPDATE SET started = excluded.started",
-                (run_hash, time.time(), json.dumps(spec, sort_keys=True)),
+                (run_hash, time.time(), strict_json(spec)),
             )
             db.executemany(
                 "INSERT OR IGNORE INTO run_episodes VALUES (?, ?)", [(run_hash, k) for k in keys]
@@ -230,15 +263,18 @@ class ResultStore:
         if result is not None:
             self._write_tables(row.key, result)
         with self._transaction(f"episode {row.key}") as db:
+            columns = {
+                "key": row.key, "kind": row.kind, "town": row.town, "method": row.method,
+                "setup": row.setup, "repetition": row.repetition, "seed": row.seed,
+                "config": strict_json(row.config), "status": row.status, "error": row.error,
+                "metrics": None if row.metrics is None else strict_json(row.metrics),
+                "wall_s": row.wall_s, "attempts": row.attempts, "finished": time.time(),
+            }  # fmt: skip
             db.execute(
-                "INSERT OR REPLACE INTO episodes VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
-                (
-                    row.key, row.kind, row.town, row.method, row.setup, row.repetition, row.seed,
-                    json.dumps(row.config, sort_keys=True), row.status, row.error,
-                    json.dumps(row.metrics) if row.metrics is not None else None,
-                    row.wall_s, row.attempts, time.time(),
-                ),
-            )  # fmt: skip
+                f"INSERT OR REPLACE INTO episodes ({', '.join(columns)}) "
+                f"VALUES ({', '.join(':' + c for c in columns)})",
+                columns,
+            )
 
     def _write_tables(self, key: str, result: EpisodeResult) -> None:
         import pyarrow as pa
@@ -259,7 +295,7 @@ class ResultStore:
         except OSError as exc:
             shutil.rmtree(tmp, ignore_errors=True)
             full = exc.errno in (errno.ENOSPC, errno.EDQUOT)
-            raise StoreError(
+            raise StoreUnavailableError(
                 f"could not write episode {key} to {self.root}"
                 + (" (disk full)" if full else "")
                 + f": {exc}; finished episodes are intact, rerun to resume"

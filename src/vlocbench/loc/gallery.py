@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vlocbench.errors import LocalizationError
-from vlocbench.geometry import Array
+from vlocbench.interfaces import Array
 
 GALLERY_FILE = "gallery.json"
 IMAGE_DIR = "images"
@@ -77,13 +77,6 @@ class Gallery:
 
     def index_of(self, name: str) -> int:
         return self._index[name]
-
-    def camera_of(self, name: str) -> CameraModel:
-        return self.cameras[self.images[self._index[name]].camera]
-
-    def positions(self) -> Array:
-        """(N, 3) camera centres in the world."""
-        return np.array([im.world_from_cam[:3, 3] for im in self.images]).reshape(-1, 3)
 
     def load_image(self, name: str) -> NDArray[np.uint8]:
         """(H, W, 3) RGB."""

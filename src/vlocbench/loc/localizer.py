@@ -21,9 +21,10 @@ from numpy.typing import NDArray
 
 from vlocbench.config import require
 from vlocbench.errors import LocalizationError
+from vlocbench.geometry import invert_pose
 from vlocbench.loc.features import Features, check_image
 from vlocbench.loc.gallery import CameraModel
-from vlocbench.loc.mapping import MAP_FILE, FeatureStore, colmap_camera
+from vlocbench.loc.mapping import MAP_FILE, FeatureStore, colmap_camera, pose_of, rigid_of
 from vlocbench.loc.registry import (
     MethodConf,
     build_features,
@@ -66,7 +67,7 @@ class LocalizerConfig:
         return max(self.min_inliers, MIN_PNP_POINTS)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class QueryResult:
     """``world_from_cam`` (4, 4) on success; ``cam_from_world_covariance`` (6, 6) from the PnP
     refinement (rotation, translation); times per stage in seconds; ``reason`` on failure."""
@@ -83,7 +84,7 @@ class QueryResult:
     fallback: bool = False
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class RigResult:
     """A rig's query: ``world_from_rig`` (4, 4) on success, from one generalized PnP over the
     cameras' correspondences (or the best camera's own pose when that has more inliers, or only one
@@ -156,7 +157,7 @@ class MapLocalizer:
                         f"{store.path} does not match the model for {im.name!r}"
                     )
                 keep = np.flatnonzero(p3d >= 0)
-                pose = np.linalg.inv(np.vstack([im.cam_from_world().matrix(), [0, 0, 0, 1]]))
+                pose = invert_pose(pose_of(im.cam_from_world()))
                 self.images.append(_MapImage(im.name, pose, feats.subset(keep), p3d[keep]))
         self.points3D = {pid: p.xyz for pid, p in rec.points3D.items()}
         self.poses = np.stack([m.world_from_cam for m in self.images])
@@ -270,12 +271,16 @@ class MapLocalizer:
                 else f"PnP found no pose from {n_corr} correspondences"
             )
             return self._failed(retrieved, seconds, reason, n_corr), corr
-        cam_from_world = np.vstack([answer["cam_from_world"].matrix(), [0, 0, 0, 1]])
         return QueryResult(
-            True, np.linalg.inv(cam_from_world), inliers, n_corr, names,
-            tuple(self.images[i].name for i in cluster),
-            np.asarray(answer.get("covariance")) if answer.get("covariance") is not None else None,
-            seconds,
+            success=True,
+            world_from_cam=invert_pose(pose_of(answer["cam_from_world"])),
+            num_inliers=inliers,
+            num_correspondences=n_corr,
+            retrieved=names,
+            cluster=tuple(self.images[i].name for i in cluster),
+            cam_from_world_covariance=None if answer.get("covariance") is None
+            else np.asarray(answer["covariance"]),
+            seconds=seconds,
         ), corr  # fmt: skip
 
     def localize_rig(
@@ -317,7 +322,7 @@ class MapLocalizer:
                 np.concatenate([corr.points2D for _, corr in pooled]),
                 np.concatenate([corr.points3D for _, corr in pooled]),
                 [k for k, corr in pooled for _ in range(len(corr.points2D))],
-                [pycolmap.Rigid3d(np.linalg.inv(m)[:3, :4]) for m in rig_from_cams],
+                [rigid_of(invert_pose(m)) for m in rig_from_cams],
                 [colmap_camera(cam, k + 1) for k, cam in enumerate(cameras)],
                 options,
             )  # fmt: skip
@@ -326,22 +331,27 @@ class MapLocalizer:
             # correspondences, as the single-camera PnP does
             inliers = 0 if answer is None else int(np.sum(answer["inlier_mask"]))
             if answer is not None and inliers > best_inliers and inliers >= c.min_inliers:
-                rig_from_world = np.vstack([answer["rig_from_world"].matrix(), [0, 0, 0, 1]])
-                return RigResult(True, np.linalg.inv(rig_from_world), inliers, -1,
-                                 tuple(results), seconds)  # fmt: skip
+                world_from_rig = invert_pose(pose_of(answer["rig_from_world"]))
+                return RigResult(success=True, world_from_rig=world_from_rig, num_inliers=inliers,
+                                 camera=-1, cameras=tuple(results), seconds=seconds)  # fmt: skip
         if best_k >= 0:
             best = results[best_k]
             assert best.world_from_cam is not None
-            world_from_rig = best.world_from_cam @ np.linalg.inv(rig_from_cams[best_k])
-            return RigResult(True, world_from_rig, best_inliers, best_k, tuple(results), seconds,
-                             best.reason)  # fmt: skip
+            world_from_rig = best.world_from_cam @ invert_pose(rig_from_cams[best_k])
+            return RigResult(success=True, world_from_rig=world_from_rig, num_inliers=best_inliers,
+                             camera=best_k, cameras=tuple(results), seconds=seconds,
+                             reason=best.reason)  # fmt: skip
         reason = "; ".join(f"camera {k}: {r.reason}" for k, r in enumerate(results))
-        return RigResult(False, None, 0, -1, tuple(results), seconds, reason)
+        return RigResult(success=False, world_from_rig=None, num_inliers=0, camera=-1,
+                         cameras=tuple(results), seconds=seconds, reason=reason)  # fmt: skip
 
     def _failed(self, retrieved: NDArray[np.int64], seconds: dict[str, float], reason: str,
                 n_corr: int = 0) -> QueryResult:  # fmt: skip
         names = tuple(self.images[i].name for i in retrieved)
         if self.config.fallback_to_retrieval and len(retrieved):
             pose = self.images[int(retrieved[0])].world_from_cam
-            return QueryResult(True, pose, 0, n_corr, names, names[:1], None, seconds, reason, True)
-        return QueryResult(False, None, 0, n_corr, names, (), None, seconds, reason)
+            return QueryResult(success=True, world_from_cam=pose, num_correspondences=n_corr,
+                               retrieved=names, cluster=names[:1], seconds=seconds, reason=reason,
+                               fallback=True)  # fmt: skip
+        return QueryResult(success=False, num_correspondences=n_corr, retrieved=names,
+                           seconds=seconds, reason=reason)  # fmt: skip

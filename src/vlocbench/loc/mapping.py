@@ -29,6 +29,7 @@ import pycolmap
 
 from vlocbench.config import config_hash, require
 from vlocbench.errors import LocalizationError
+from vlocbench.geometry import invert_pose
 from vlocbench.loc.features import Features
 from vlocbench.loc.gallery import CameraModel, Gallery
 from vlocbench.loc.registry import MethodConf, build_features, build_matcher, build_retrieval
@@ -132,7 +133,7 @@ def _fundamental(
     cam_a: CameraModel, pose_a: np.ndarray, cam_b: CameraModel, pose_b: np.ndarray
 ) -> np.ndarray:
     """F with x_b^T F x_a = 0 for OpenCV pixel coordinates, from world_from_cam poses."""
-    b_from_a = np.linalg.inv(pose_b) @ pose_a
+    b_from_a = invert_pose(pose_b) @ pose_a
     R, t = b_from_a[:3, :3], b_from_a[:3, 3]
     tx = np.array([[0, -t[2], t[1]], [t[2], 0, -t[0]], [-t[1], t[0], 0]])
     return np.linalg.inv(cam_b.K).T @ tx @ R @ np.linalg.inv(cam_a.K)
@@ -157,8 +158,14 @@ def colmap_camera(cam: CameraModel, camera_id: int) -> pycolmap.Camera:
     )  # fmt: skip
 
 
-def cam_from_world_rigid(world_from_cam: np.ndarray) -> pycolmap.Rigid3d:
-    return pycolmap.Rigid3d(np.linalg.inv(world_from_cam)[:3, :4])
+def rigid_of(a_from_b: np.ndarray) -> pycolmap.Rigid3d:
+    """pycolmap's transform of a (4, 4) pose."""
+    return pycolmap.Rigid3d(a_from_b[:3, :4])
+
+
+def pose_of(rigid: pycolmap.Rigid3d) -> np.ndarray:
+    """The (4, 4) pose of a pycolmap transform."""
+    return np.vstack([rigid.matrix(), [0.0, 0.0, 0.0, 1.0]])
 
 
 # -- the pipeline --------------------------------------------------------------------------------
@@ -258,7 +265,7 @@ def _triangulate(gallery: Gallery, mapping: MappingConfig, features: FeatureStor
     ids = {}
     for k, im in enumerate(gallery.images):
         image = pycolmap.Image(name=im.name, camera_id=cam_ids[im.camera], image_id=k + 1)
-        rec.add_image_with_trivial_frame(image, cam_from_world_rigid(im.world_from_cam))
+        rec.add_image_with_trivial_frame(image, rigid_of(invert_pose(im.world_from_cam)))
         ids[im.name] = k + 1
     db_path = out / "database.db"
     db_path.unlink(missing_ok=True)

@@ -3,7 +3,7 @@
 Imports neither ``sim`` nor ``loc``; the episode loop in ``bench`` wires it to them.
 """
 
-from vlocbench.nav.control import ControlCommand, ControllerConfig, Pid, PidGains, VehicleController
+from vlocbench.nav.control import ControllerConfig, Pid, PidGains, VehicleController
 from vlocbench.nav.ekf import Ekf, EkfConfig, PoseMeasurement, UpdateOutcome
 from vlocbench.nav.failure import Failure, FailureConfig, FailureDetector
 from vlocbench.nav.global_planner import GlobalPlanner, LanePoint
@@ -20,7 +20,6 @@ from vlocbench.nav.path import Projection, WaypointPath
 from vlocbench.nav.progress import ProgressConfig, ProgressTracker
 
 __all__ = [
-    "ControlCommand",
     "ControllerConfig",
     "Drift",
     "Ekf",

@@ -20,7 +20,7 @@ import numpy as np
 
 from vlocbench.config import require, require_one_of
 from vlocbench.geometry import wrap_angle
-from vlocbench.nav.path import Array
+from vlocbench.interfaces import Array, Control
 
 MPS_TO_KMH = 3.6
 
@@ -96,15 +96,6 @@ class ControllerConfig:
         )
 
 
-@dataclass(frozen=True)
-class ControlCommand:
-    """Throttle and brake in [0, 1], steer in [-1, 1] (+ = left), as the vehicle takes them."""
-
-    throttle: float
-    steer: float
-    brake: float
-
-
 def heading_error_rad(x_m: float, y_m: float, yaw_rad: float, target_xy: Array) -> float:
     """Signed angle from the car's heading to the direction of ``target_xy`` (+ = to the left)."""
     bearing = np.arctan2(target_xy[1] - y_m, target_xy[0] - x_m)
@@ -135,12 +126,12 @@ class VehicleController:
         speed_mps: float,
         target_xy: Array,
         remaining_m: float,
-    ) -> ControlCommand:
+    ) -> Control:
         """Command for a car believed at (x, y, yaw) with ``speed_mps``, heading for ``target_xy``."""
         c = self.config
         error_kmh = (self.target_speed_mps(remaining_m) - speed_mps) * MPS_TO_KMH
         accel = self.speed_pid.step(error_kmh)
         steer = self.heading_pid.step(heading_error_rad(x_m, y_m, yaw_rad, target_xy))
         if accel >= 0 or not c.brake:
-            return ControlCommand(min(max(accel, 0.0), c.max_throttle), steer, 0.0)
-        return ControlCommand(0.0, steer, min(-accel, c.max_brake))
+            return Control(min(max(accel, 0.0), c.max_throttle), steer, 0.0)
+        return Control(0.0, steer, min(-accel, c.max_brake))

@@ -31,8 +31,8 @@ import numpy as np
 
 from vlocbench.config import require, require_one_of
 from vlocbench.geometry import wrap_angle
+from vlocbench.interfaces import Array
 from vlocbench.nav.odometry import OdometryReading, integrate_planar
-from vlocbench.nav.path import Array
 
 _N = 6  # x, y, yaw, v, w, a
 _H_POSE = np.eye(3, _N)

@@ -17,7 +17,8 @@ import numpy as np
 
 from vlocbench.errors import ConfigError, PlanningError
 from vlocbench.geometry import resample_polyline
-from vlocbench.nav.path import Array, WaypointPath
+from vlocbench.interfaces import Array
+from vlocbench.nav.path import WaypointPath
 
 
 @dataclass(frozen=True)

@@ -23,7 +23,8 @@ from typing import Literal
 import numpy as np
 
 from vlocbench.config import require, require_one_of
-from vlocbench.nav.path import Array, WaypointPath
+from vlocbench.interfaces import Array
+from vlocbench.nav.path import WaypointPath
 
 
 @dataclass(frozen=True)

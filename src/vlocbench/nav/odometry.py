@@ -12,7 +12,7 @@ import numpy as np
 
 from vlocbench.config import require
 from vlocbench.geometry import wrap_angle
-from vlocbench.nav.path import Array
+from vlocbench.interfaces import Array
 
 
 @dataclass(frozen=True)

@@ -5,12 +5,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
 
 from vlocbench.errors import ConfigError
 from vlocbench.geometry import headings_of
-
-Array = NDArray[np.float64]
+from vlocbench.interfaces import Array
 
 
 @dataclass(frozen=True)
@@ -24,11 +22,6 @@ class Projection:
     segment: int
     s_m: float
     distance_m: float
-
-    @property
-    def closest_index(self) -> int:
-        """Index of the waypoint at or just behind the foot point."""
-        return self.segment
 
 
 class WaypointPath:

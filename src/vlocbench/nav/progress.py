@@ -7,7 +7,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from vlocbench.config import require
-from vlocbench.nav.path import Array, Projection, WaypointPath
+from vlocbench.interfaces import Array
+from vlocbench.nav.path import Projection, WaypointPath
 
 
 @dataclass(frozen=True)

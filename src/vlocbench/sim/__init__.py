@@ -8,6 +8,7 @@ from vlocbench.sim.backend import select_backend
 
 select_backend()
 
+from vlocbench.interfaces import Control  # noqa: E402
 from vlocbench.sim.camera import Camera, Extrinsics, Intrinsics, gallery_camera  # noqa: E402
 from vlocbench.sim.conditions import (  # noqa: E402
     Conditions,
@@ -20,7 +21,7 @@ from vlocbench.sim.conditions import (  # noqa: E402
 )
 from vlocbench.sim.simulator import Frame, Simulator, StepResult  # noqa: E402
 from vlocbench.sim.town import Town, TownSpec, builtin_town_names, generate_town, load_town_spec  # noqa: E402
-from vlocbench.sim.vehicle import Control, VehicleParams, VehicleState  # noqa: E402
+from vlocbench.sim.vehicle import VehicleParams, VehicleState  # noqa: E402
 
 __all__ = [
     "Camera",

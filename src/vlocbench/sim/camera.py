@@ -15,7 +15,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from vlocbench.config import require
-from vlocbench.geometry import BODY_FROM_OPTICAL, Array, make_pose, rpy_to_matrix
+from vlocbench.geometry import BODY_FROM_OPTICAL, make_pose, rpy_to_matrix
+from vlocbench.interfaces import Array
 
 
 @dataclass(frozen=True)

@@ -29,7 +29,8 @@ class Illumination:
     sun_azimuth_deg: float = 135.0
 
     def __post_init__(self) -> None:
-        require(self.k >= 0, "illumination.k", f"must be >= 0, got {self.k:g}")
+        # the paper's scale; at k = 10 the sun is 0.07 deg high and 1/1024 as bright: night
+        require(0 <= self.k <= 10, "illumination.k", f"must be in [0, 10], got {self.k:g}")
         require(self.sun_intensity_base > 0, "illumination.sun_intensity_base", "must be > 0")
         require(
             0 < self.sun_elevation_base_rad <= np.pi / 2,

@@ -7,9 +7,8 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
-from numpy.typing import NDArray
 
-Image = NDArray[np.uint8]
+from vlocbench.interfaces import Image
 
 
 def apply_rain(image: Image, amount: float, brightness: float, rng: np.random.Generator) -> Image:

@@ -14,6 +14,7 @@ import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
+from vlocbench.interfaces import Image
 from vlocbench.sim import textures as tex
 from vlocbench.sim.backend import missing_libraries_error, select_backend
 from vlocbench.sim.conditions import Conditions
@@ -28,7 +29,6 @@ from vlocbench.sim.scene import (
     TownScene,
 )
 
-Image = NDArray[np.uint8]
 NEAR_M, FAR_M = 0.1, 2000.0
 # what the camera's light meter reads of the car's own headlights, per unit of their intensity
 HEADLIGHT_METERING = 0.2

@@ -16,13 +16,10 @@ from dataclasses import dataclass
 
 import networkx as nx
 import numpy as np
-from numpy.typing import NDArray
 
 from vlocbench.errors import ConfigError
 from vlocbench.geometry import headings_of, polyline_length, resample_polyline
-
-Array = NDArray[np.float64]
-
+from vlocbench.interfaces import Array
 
 # unit headings: east, north, west, south
 HEADINGS: dict[str, tuple[int, int]] = {"E": (1, 0), "N": (0, 1), "W": (-1, 0), "S": (0, -1)}

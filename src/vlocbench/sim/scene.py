@@ -18,11 +18,10 @@ import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
+from vlocbench.interfaces import Array
 from vlocbench.sim import textures as tex
 from vlocbench.sim.meshes import MeshBuilder, platform_mesh
 from vlocbench.sim.town import Town
-
-Array = NDArray[np.float64]
 
 GROUP_STATIC, GROUP_FOLIAGE_FULL, GROUP_FOLIAGE_SPARSE = 0, 1, 2
 GROUP_TRAFFIC, GROUP_COLLISION, GROUP_EGO = 3, 4, 5

@@ -13,7 +13,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vlocbench.config import require
-from vlocbench.geometry import Array
+from vlocbench.interfaces import Array, Control
 from vlocbench.sim.camera import Camera
 from vlocbench.sim.collision import CollisionEvent, touching
 from vlocbench.sim.conditions import Conditions
@@ -21,7 +21,7 @@ from vlocbench.sim.renderer import Renderer
 from vlocbench.sim.scene import SceneOptions, TownScene, build_scene
 from vlocbench.sim.town import Town
 from vlocbench.sim.traffic import TrafficModel
-from vlocbench.sim.vehicle import Control, VehicleParams, VehicleState, at_rest, step_vehicle
+from vlocbench.sim.vehicle import VehicleParams, VehicleState, at_rest, step_vehicle
 
 
 @dataclass(frozen=True)
@@ -41,7 +41,10 @@ class StepResult:
 
 
 class Simulator:
-    """Drive a car through ``town`` under ``conditions``; render its cameras on demand."""
+    """Drive a car through ``town`` under ``conditions``; render its cameras on demand.
+
+    Holds an OpenGL context once it has rendered: ``close()`` it, or use it as a context manager.
+    """
 
     def __init__(
         self,
@@ -150,6 +153,12 @@ class Simulator:
             image = self.renderer.render(pose, i.width, i.height, i.fov_deg, frame_id * 16 + k)
             frames.append(Frame(cam, image, pose, self.state.time_s))
         return frames
+
+    def __enter__(self) -> Simulator:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
 
     def close(self) -> None:
         if self._renderer is not None:

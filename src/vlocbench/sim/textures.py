@@ -13,7 +13,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-Image = NDArray[np.uint8]
+from vlocbench.interfaces import Image
 
 PX_PER_M = 64  # texel density of facade tiles: about 1.3 texels per pixel at 5 m with fx = 400
 

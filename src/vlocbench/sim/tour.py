@@ -52,28 +52,29 @@ def tour_sections(
     for name in towns:
         t0 = time.perf_counter()
         town = generate_town(load_town_spec(name))
-        sim = Simulator(town)
-        build_s = time.perf_counter() - t0
-        save_town_map(town, out / f"{name}_map.png")
-        n = len(town.route.waypoints_xy)
-        indices = np.linspace(n * 0.05, n * 0.9, stops).astype(int)
-        rows = []
-        for idx in indices:
-            x, y = town.route.waypoints_xy[idx]
-            sim.teleport(float(x), float(y), float(town.route.yaw_rad[idx]))
-            tiles = []
-            for label, cond in TOUR_CONDITIONS.items():
-                sim.set_conditions(cond)
-                cam = forward if "headlights" in label else camera
-                image = sim.render([cam], frame_id=int(idx))[0].image
-                h = round(image.shape[0] * thumb_width / image.shape[1])
-                tiles.append(cv2.resize(image, (thumb_width, h), interpolation=cv2.INTER_AREA))
-            rows.append(np.concatenate(tiles, axis=1))
-        sheet = np.concatenate(rows, axis=0)
-        cv2.imwrite(
-            str(out / f"{name}_conditions.jpg"), sheet[:, :, ::-1], [cv2.IMWRITE_JPEG_QUALITY, 88]
-        )
-        sim.close()
+        with Simulator(town) as sim:
+            build_s = time.perf_counter() - t0
+            save_town_map(town, out / f"{name}_map.png")
+            n = len(town.route.waypoints_xy)
+            indices = np.linspace(n * 0.05, n * 0.9, stops).astype(int)
+            rows = []
+            for idx in indices:
+                x, y = town.route.waypoints_xy[idx]
+                sim.teleport(float(x), float(y), float(town.route.yaw_rad[idx]))
+                tiles = []
+                for label, cond in TOUR_CONDITIONS.items():
+                    sim.set_conditions(cond)
+                    cam = forward if "headlights" in label else camera
+                    image = sim.render([cam], frame_id=int(idx))[0].image
+                    h = round(image.shape[0] * thumb_width / image.shape[1])
+                    tiles.append(cv2.resize(image, (thumb_width, h), interpolation=cv2.INTER_AREA))
+                rows.append(np.concatenate(tiles, axis=1))
+            sheet = np.concatenate(rows, axis=0)
+            cv2.imwrite(
+                str(out / f"{name}_conditions.jpg"),
+                sheet[:, :, ::-1],
+                [cv2.IMWRITE_JPEG_QUALITY, 88],
+            )
         sections.append(
             f"<h2>{html.escape(name)}</h2><p>route {town.route.length_m:.0f} m, "
             f"{town.route.num_turns} turns, {len(town.buildings)} buildings; scene built in "

@@ -16,13 +16,13 @@ from typing import Literal
 
 import networkx as nx
 import numpy as np
-from numpy.typing import NDArray
 
 from vlocbench.config import from_dict, load_yaml, require
 from vlocbench.errors import UnknownNameError
+from vlocbench.interfaces import Array
 from vlocbench.sim.roads import RoadLayout, Route, build_lane_graph, build_route
 
-Array = NDArray[np.float64]
+ROUTE_LENGTH_TOLERANCE = 0.1  # of RouteSpec.target_length_m
 Rect = tuple[float, float, float, float]  # x0, y0, x1, y1 (metres, x0 < x1, y0 < y1)
 Side = Literal["none", "south", "north", "west", "east"]
 
@@ -100,7 +100,9 @@ class RouteSpec:
     nodes: tuple[tuple[int, int], ...]
     start_offset_m: float = 20.0
     end_offset_m: float = 20.0
-    target_length_m: float | None = None  # documentation of intent; tests check the built length
+    # the length the route is meant to have (the paper's routes); a spec whose nodes and offsets
+    # give a route more than ROUTE_LENGTH_TOLERANCE off it is refused
+    target_length_m: float | None = None
 
 
 @dataclass(frozen=True)
@@ -439,6 +441,13 @@ class _Builder:
         )
         route = build_route(
             self.layout, spec.route.nodes, spec.route.start_offset_m, spec.route.end_offset_m
+        )
+        target = spec.route.target_length_m
+        require(
+            target is None or abs(route.length_m - target) <= ROUTE_LENGTH_TOLERANCE * target,
+            "route.target_length_m",
+            f"the route's nodes and offsets give {route.length_m:.0f} m, more than "
+            f"{ROUTE_LENGTH_TOLERANCE:.0%} off {target} m",
         )
         return Town(
             spec=spec,

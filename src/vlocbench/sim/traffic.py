@@ -8,13 +8,11 @@ from __future__ import annotations
 
 import networkx as nx
 import numpy as np
-from numpy.typing import NDArray
 
 from vlocbench.geometry import polyline_length, resample_polyline
+from vlocbench.interfaces import Array
 from vlocbench.sim.conditions import Traffic
 from vlocbench.sim.town import Town
-
-Array = NDArray[np.float64]
 
 
 class _PathFollower:

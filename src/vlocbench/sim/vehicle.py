@@ -13,7 +13,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from vlocbench.config import require
-from vlocbench.geometry import Array, planar_pose, wrap_angle
+from vlocbench.geometry import planar_pose, wrap_angle
+from vlocbench.interfaces import Array, Control
 
 
 @dataclass(frozen=True)
@@ -34,24 +35,6 @@ class VehicleParams:
         require(self.max_accel_mps2 > 0, "vehicle.max_accel_mps2", "must be > 0")
         require(self.max_brake_mps2 > 0, "vehicle.max_brake_mps2", "must be > 0")
         require(self.actuator_tau_s >= 0, "vehicle.actuator_tau_s", "must be >= 0")
-
-
-@dataclass(frozen=True)
-class Control:
-    """CARLA-style command: throttle and brake in [0, 1], steer in [-1, 1] (positive = left)."""
-
-    throttle: float = 0.0
-    steer: float = 0.0
-    brake: float = 0.0
-
-    def __post_init__(self) -> None:
-        for name, lo in (("throttle", 0.0), ("steer", -1.0), ("brake", 0.0)):
-            v = getattr(self, name)
-            require(
-                np.isfinite(v) and lo <= v <= 1.0,
-                f"control.{name}",
-                f"must be in [{lo:g}, 1], got {v}",
-            )
 
 
 @dataclass(frozen=True)
