@@ -22,7 +22,8 @@ from vlocbench.bench.experiment import load_experiment
 from vlocbench.bench.localizer import LocalizationQuery
 from vlocbench.bench.metrics import recall
 from vlocbench.bench.paper import paper_results
-from vlocbench.bench.runner import _route, _town, prepare_maps
+from vlocbench.bench.runner import prepare_maps
+from vlocbench.bench.towns import route_named, town_named
 from vlocbench.bench.visual import VisualLocalizer
 from vlocbench.geometry import planar_pose, pose_error
 from vlocbench.sim import Conditions, Exposure, Illumination, Simulator
@@ -39,7 +40,7 @@ def main() -> None:
     ap.add_argument("--shot-noise", type=float, default=defaults.shot_noise)
     ap.add_argument("--read-noise", type=float, default=defaults.read_noise)
     args = ap.parse_args()
-    spec = load_experiment(
+    plan = load_experiment(
         {
             "name": "bench_illumination",
             "towns": [args.town],
@@ -48,9 +49,9 @@ def main() -> None:
             "baseline": False,
         }
     )
-    map_dir = prepare_maps(spec, print)[(args.town, args.method)]
-    town, route = _town(args.town), _route(args.town, 0.0)
-    camera = dataclasses.replace(spec.gallery.camera, name="query")
+    map_dir = prepare_maps(plan, progress=True)[(args.town, args.method)]
+    town, route = town_named(args.town), route_named(args.town)
+    camera = dataclasses.replace(plan.spec.gallery.camera, name="query")
     localizer = VisualLocalizer(map_dir, (camera,), name=args.method)
     exposure = Exposure(
         max_gain=args.max_gain, shot_noise=args.shot_noise, read_noise=args.read_noise

@@ -35,11 +35,11 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--out", type=Path, default=Path("out/bench_runner"))
     args = ap.parse_args()
-    spec = load_experiment(
+    plan = load_experiment(
         {**EXPERIMENT, "output": str(args.out / "warmup"), "cache": str(args.out / "cache")}
     )
-    shutil.rmtree(spec.output_dir, ignore_errors=True)
-    run_experiment(spec, progress=False)  # gallery, map, imports, caches
+    shutil.rmtree(plan.output_dir, ignore_errors=True)
+    run_experiment(plan, progress=False)  # gallery, map, imports, caches
     for workers in (int(w) for w in args.workers.split(",")):
         rates, overheads, stores = [], [], []
         for k in range(args.repeats):
@@ -53,7 +53,8 @@ def main() -> None:
                 progress=False,
             )
             rates.append(s.finished / s.episodes_wall_s * 3600)
-            overheads.append(100 * s.harness_overhead)
+            if s.harness_overhead is not None:  # None: a worker died
+                overheads.append(100 * s.harness_overhead)
             stores.append(100 * s.store_overhead)
         print(
             f"{workers} worker(s): {statistics.median(rates):.0f} episodes/hour "

@@ -164,22 +164,20 @@ def _drive(args: argparse.Namespace) -> int:
 
 
 def _run(args: argparse.Namespace) -> int:
-    import dataclasses
-
     from vlocbench.bench.experiment import load_experiment
     from vlocbench.bench.report import summary_lines, write_report
     from vlocbench.bench.runner import run_experiment
 
-    spec = load_experiment(args.experiment)
+    plan = load_experiment(args.experiment)
     if args.output:
-        spec = dataclasses.replace(spec, output=str(args.output))
+        plan = plan.with_output(args.output)
     with _signals_interrupt():
         summary = run_experiment(
-            spec, workers=args.workers, scheduler=args.scheduler, progress=not args.no_progress
+            plan, workers=args.workers, scheduler=args.scheduler, progress=not args.no_progress
         )
     overhead = summary.harness_overhead
     print(
-        f"{spec.name}: {summary.finished} episodes run, {summary.skipped} done before, "
+        f"{plan.name}: {summary.finished} episodes run, {summary.skipped} done before, "
         f"{summary.errors} with errors; {summary.workers_lost} workers died, "
         f"{summary.retried} episodes rerun after it; {summary.wall_s / 60:.1f} min "
         + (
@@ -190,7 +188,7 @@ def _run(args: argparse.Namespace) -> int:
     )
     if args.no_report:
         return 1 if summary.errors else 0
-    files = write_report(spec.output_dir, examples=not args.no_examples)
+    files = write_report(plan.output_dir, examples=not args.no_examples)
     print("\n".join(summary_lines(files.summary)))
     print(f"report: {files.html.resolve()}")
     return 1 if summary.errors else 0

@@ -2,7 +2,7 @@ import dataclasses
 
 import pytest
 
-from vlocbench.bench.experiment import expand, load_experiment, setups
+from vlocbench.bench.experiment import load_experiment, resolve
 from vlocbench.errors import ConfigError, UnknownNameError
 
 MAPS = {
@@ -24,7 +24,7 @@ def test_sweep_is_a_cartesian_product_with_grouped_levels():
             "season": "winter",  # a scalar: fixed, not an axis
         }
     )
-    got = setups(spec)
+    got = spec.setups
     assert len(got) == 6
     assert {s.conditions.season for s in got} == {"winter"}
     assert got[4].conditions.illumination.k == 6 and got[4].conditions.viewpoint.dz_m == 0
@@ -37,7 +37,7 @@ def test_query_cameras_and_rigs_start_from_the_gallery_camera():
         gallery={"camera": {"intrinsics": {"width": 320, "height": 240}}},
         sweep={"camera.extrinsics.yaw_deg": [-90, -60]},
     )
-    cams = [s.cameras[0] for s in setups(spec)]
+    cams = [s.cameras[0] for s in spec.setups]
     assert [c.extrinsics.yaw_deg for c in cams] == [-90, -60]
     assert {(c.intrinsics.width, c.extrinsics.z_m) for c in cams} == {(320, 2.0)}
     rig = _spec(
@@ -48,14 +48,14 @@ def test_query_cameras_and_rigs_start_from_the_gallery_camera():
             ]
         }
     )
-    assert [len(s.cameras) for s in setups(rig)] == [1, 2]
-    assert setups(rig)[1].cameras[1].extrinsics.yaw_deg == 90
+    assert [len(s.cameras) for s in rig.setups] == [1, 2]
+    assert rig.setups[1].cameras[1].extrinsics.yaw_deg == 90
 
 
 def test_expansion_counts_and_keys():
     spec = _spec(methods=["sift-vlad", {"name": "orb", "features": "orb-teblid", "matcher": "nn-hamming",
                                          "retrieval": "vlad"}], sweep={"illumination.k": [0, 6]})  # fmt: skip
-    tasks = expand(spec, MAPS)
+    tasks = spec.tasks(MAPS)
     kinds = [t.kind for t in tasks]
     # per method and setup: 1 recall + 2 failure; the baseline renders nothing, so k does not
     # change it: one baseline per repetition serves both setups
@@ -66,15 +66,35 @@ def test_expansion_counts_and_keys():
     assert {t.episode.mode for t in tasks if t.kind == "recall"} == {"ground_truth"}
     assert sorted({t.episode.seed for t in tasks if t.kind == "failure"}) == [0, 1]
     # the same spec gives the same keys; any change to what determines a result changes them
-    assert [t.key for t in expand(spec, MAPS)] == [t.key for t in tasks]
-    other = expand(dataclasses.replace(spec, seed=7), MAPS)
+    assert [t.key for t in spec.tasks(MAPS)] == [t.key for t in tasks]
+    other = resolve(dataclasses.replace(spec.spec, seed=7)).tasks(MAPS)
     assert not {t.key for t in other} & {t.key for t in tasks}
     latency = _spec(methods=["sift-vlad"], episode={"latency": {"mode": "none"}})
     base = _spec(methods=["sift-vlad"])
-    assert not {t.key for t in expand(latency, MAPS)} & {t.key for t in expand(base, MAPS)}
+    assert not {t.key for t in latency.tasks(MAPS)} & {t.key for t in base.tasks(MAPS)}
     # traffic changes what the baseline drives through: then setups need their own baselines
     traffic = _spec(sweep={"traffic.cars": [0, 5]}, recall=False, failure=False)
-    assert len(expand(traffic, {})) == 4
+    assert len(traffic.tasks({})) == 4
+
+
+def test_episode_settings_sweep_as_setups():
+    plan = _spec(sweep={"episode.ekf.late_measurements": ["current", "replay"]})
+    assert [s.episode.ekf.late_measurements for s in plan.setups] == ["current", "replay"]
+    assert plan.setups[1].label == "episode.ekf.late_measurements=replay"
+    assert plan.axis == ("episode.ekf.late_measurements",)
+    tasks = plan.tasks(MAPS)
+    keys = [{t.key for t in tasks if t.setup == s} for s in plan.setups]
+    assert not keys[0] & keys[1]  # the baseline too: its EKF is part of what it drives with
+    assert {t.episode.ekf.late_measurements for t in tasks if t.setup == plan.setups[1]} == {
+        "replay"
+    }
+    # a fixed value equal to the default changes no key
+    fixed = _spec(sweep={"episode.ekf.late_measurements": "current"})
+    assert {t.key for t in fixed.tasks(MAPS)} == {t.key for t in _spec().tasks(MAPS)}
+    with pytest.raises(ConfigError, match=r"sweep\.episode\.seed: is set per episode"):
+        _spec(sweep={"episode.seed": [1, 2]})
+    with pytest.raises(UnknownNameError, match="valid: current, replay"):
+        _spec(sweep={"episode.ekf.late_measurements": ["sometimes"]})
 
 
 def test_bad_experiments_are_clear_errors(tmp_path):
@@ -118,15 +138,15 @@ def test_shipped_experiments_load():
             "headlights"} <= names  # fmt: skip
     for f in files:
         spec = load_experiment(f)
-        assert spec.name == f.stem and setups(spec)
+        assert spec.name == f.stem and spec.setups
     # the paper's three at its scale (the reduced illumination run shares the full one's store)
     paper = {f.stem: load_experiment(f) for f in sorted(root.joinpath("paper").glob("*.yaml"))}
     assert set(paper) == {"illumination", "illumination_reduced", "viewpoint", "weather"}
-    assert len(setups(paper["illumination"])) == 11 and paper["illumination"].repetitions == 5
-    assert len(setups(paper["viewpoint"])) == 13 and len(setups(paper["weather"])) == 4
+    assert len(paper["illumination"].setups) == 11 and paper["illumination"].spec.repetitions == 5
+    assert len(paper["viewpoint"].setups) == 13 and len(paper["weather"].setups) == 4
     full, reduced = paper["illumination"], paper["illumination_reduced"]
-    assert (reduced.name, reduced.output) == (full.name, full.output)
-    assert {s.label for s in setups(reduced)} < {s.label for s in setups(full)}
+    assert (reduced.name, reduced.output_dir) == (full.name, full.output_dir)
+    assert {s.label for s in reduced.setups} < {s.label for s in full.setups}
 
 
 def test_episode_keys_are_stable():
@@ -135,7 +155,7 @@ def test_episode_keys_are_stable():
     import hashlib
 
     spec = load_experiment("experiments/paper/illumination_reduced.yaml")
-    maps = {(t, m.name): f"/m/{t}/{m.name}" for t in spec.towns for m in spec.methods}
-    keys = sorted(t.key for t in expand(spec, maps))
+    maps = {(t, m.name): f"/m/{t}/{m.name}" for t in spec.spec.towns for m in spec.spec.methods}
+    keys = sorted(t.key for t in spec.tasks(maps))
     assert len(keys) == 102
     assert hashlib.sha1(" ".join(keys).encode()).hexdigest()[:12] == "7a8e70c46d47"

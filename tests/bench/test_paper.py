@@ -2,12 +2,12 @@ import numpy as np
 import pytest
 
 from tests.bench.fakes import run_fake
-from vlocbench.bench.experiment import expand, load_experiment
+from vlocbench.bench.experiment import load_experiment, plan_from_stored
 from vlocbench.bench.paper import paper_results, shape, spearman
 from vlocbench.bench.report import paper_comparison_tables
 from vlocbench.bench.runner import execute
 from vlocbench.bench.store import ResultStore, read_latest_run
-from vlocbench.bench.summary import spec_from_stored, summarize
+from vlocbench.bench.summary import summarize
 from vlocbench.config import to_dict
 
 
@@ -46,12 +46,12 @@ def test_spearman_and_shape_measures():
 def test_a_run_is_reported_beside_the_paper(tmp_path):
     spec = load_experiment({"name": "ill", "towns": ["town10"], "methods": ["sift"],
                             "repetitions": 2, "sweep": {"illumination.k": [0, 6, 8]}})  # fmt: skip
-    tasks = expand(spec, {("town10", "sift"): "/nowhere/g/m"})
+    tasks = spec.tasks({("town10", "sift"): "/nowhere/g/m"})
     with ResultStore(tmp_path, "ill") as store:
-        store.start_run(spec.spec_hash, to_dict(spec), [t.key for t in tasks])
+        store.start_run(spec.spec.spec_hash, to_dict(spec), [t.key for t in tasks])
         execute(tasks, store, workers=1, runner=run_fake, progress=False)
     stored, rows = read_latest_run(tmp_path)
-    tables = dict(paper_comparison_tables(summarize(spec_from_stored(stored), rows)))
+    tables = dict(paper_comparison_tables(summarize(plan_from_stored(stored), rows)))
     f_caption = next(c for c in tables if "beside the paper's (Suomela" in c)
     header, body = tables[f_caption]
     assert header == ["source", "method", "0", "6", "8"]

@@ -11,17 +11,17 @@ import yaml
 
 from tests.bench.fakes import CONTROL_ENV, run_fake
 from tests.conftest import small_spec
-from vlocbench.bench.experiment import expand, load_experiment
+from vlocbench.bench.experiment import load_experiment, plan_from_stored
 from vlocbench.bench.runner import execute, run_experiment
 from vlocbench.bench.store import DB_FILE, ResultStore, read_latest_run
-from vlocbench.bench.summary import spec_from_stored, summarize
+from vlocbench.bench.summary import summarize
 from vlocbench.config import to_dict
 
 
 def _fake_tasks():
     spec = load_experiment({"name": "fake", "towns": ["town10"], "methods": ["sift-vlad"],
                             "sweep": {"illumination.k": [0, 6]}, "repetitions": 2})  # fmt: skip
-    return expand(spec, {("town10", "sift-vlad"): "/nowhere/g/m"})  # 2 x (1 + 2) + 2 = 8
+    return spec.tasks({("town10", "sift-vlad"): "/nowhere/g/m"})  # 2 x (1 + 2) + 2 = 8
 
 
 @pytest.fixture
@@ -116,6 +116,7 @@ def test_a_killed_or_interrupted_run_leaves_no_process_and_a_consistent_store(
     driver.send_signal(how)
     code = driver.wait(timeout=30)
     assert code == (-signal.SIGKILL if how == signal.SIGKILL else 130), driver.stderr.read()
+    deadline = time.monotonic() + 30  # a worker still starting up notices once it has started
     while _alive(workers) and time.monotonic() < deadline:
         time.sleep(0.2)
     assert _alive(workers) == []
@@ -162,12 +163,12 @@ def test_a_grouped_sweep_whose_keys_are_not_sorted_reports_every_cell(tmp_path):
     levels = [{"fog_visual_range_m": v, "rain": 0.8, "overcast": 0.8} for v in (90, 30)]
     spec = load_experiment({"name": "wx", "towns": ["town10"], "methods": ["sift-vlad"],
                             "repetitions": 1, "sweep": {"weather": levels}})  # fmt: skip
-    tasks = expand(spec, {("town10", "sift-vlad"): "/nowhere/g/m"})
+    tasks = spec.tasks({("town10", "sift-vlad"): "/nowhere/g/m"})
     with ResultStore(tmp_path, "wx") as store:
-        store.start_run(spec.spec_hash, to_dict(spec), [t.key for t in tasks])
+        store.start_run(spec.spec.spec_hash, to_dict(spec), [t.key for t in tasks])
         execute(tasks, store, workers=1, runner=run_fake, progress=False)
     stored, rows = read_latest_run(tmp_path)
-    summary = summarize(spec_from_stored(stored), rows)
+    summary = summarize(plan_from_stored(stored), rows)
     labels = [s.label for s in summary.setups]
     assert labels == [
         "weather(fog_visual_range_m=90, overcast=0.8, rain=0.8)",

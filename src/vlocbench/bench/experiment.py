@@ -39,7 +39,9 @@ from vlocbench.sim.town import TownSpec, load_town_spec
 
 EpisodeKind = Literal["recall", "failure", "baseline"]
 _CONDITION_KEYS = tuple(f.name for f in dataclasses.fields(Conditions))
-SWEEP_ROOTS = (*_CONDITION_KEYS, "camera", "cameras")
+SWEEP_ROOTS = (*_CONDITION_KEYS, "camera", "cameras", "episode")
+# set per episode by its kind and repetition, so not sweepable
+_PER_TASK_EPISODE_KEYS = ("episode.mode", "episode.seed")
 
 
 @dataclass(frozen=True)
@@ -91,14 +93,16 @@ class GallerySpec:
         require(0.5 <= self.speed_mps <= 20, "gallery.speed_mps", "must be in [0.5, 20] m/s")
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Setup:
-    """One combination of swept values: the query conditions and cameras."""
+    """One combination of swept values, resolved: the query conditions and cameras, and the episode
+    config (the experiment's, with any ``episode.*`` sweep keys applied)."""
 
     label: str  # "illumination.k=3, season=winter"; "default" when nothing is swept
     levels: tuple[tuple[str, Any], ...]  # (key, value) of each swept key, in sweep order
     conditions: Conditions
     cameras: tuple[Camera, ...]
+    episode: EpisodeConfig
 
 
 @dataclass(frozen=True)
@@ -150,7 +154,7 @@ class ExperimentSpec:
         return config_hash(self)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class EpisodeTask:
     """One episode to run: everything a worker needs, and the key of its result."""
 
@@ -183,8 +187,8 @@ def _method(item: Any, index: int) -> MethodSpec:
     raise ConfigError(f"methods[{index}]", "expected a preset name or a mapping")
 
 
-def load_experiment(source: str | Path | Mapping[str, Any]) -> ExperimentSpec:
-    """An experiment from a YAML file (or its parsed mapping), validated and resolved."""
+def load_experiment(source: str | Path | Mapping[str, Any]) -> ExperimentPlan:
+    """An experiment from a YAML file (or its parsed mapping), validated and resolved into its plan."""
     data = load_yaml(source) if isinstance(source, str | Path) else dict(source)
     if not isinstance(data, dict):
         raise ConfigError(str(source), "an experiment file must be a mapping")
@@ -202,11 +206,117 @@ def load_experiment(source: str | Path | Mapping[str, Any]) -> ExperimentSpec:
         data["name"] = Path(source).stem
     data["methods"] = [_method(m, i) for i, m in enumerate(methods)]
     data["sweep"] = [(str(k), v) for k, v in sweep.items()]
-    spec = from_dict(ExperimentSpec, data)
+    return resolve(from_dict(ExperimentSpec, data))
+
+
+def resolve(spec: ExperimentSpec) -> ExperimentPlan:
+    """The plan of a validated spec: every town checked, every sweep point resolved."""
     for town in spec.towns:
         _town_spec(town)
-    setups(spec)  # validates every key and level now, not in a worker
-    return spec
+    sweep = _sweep_levels(spec)
+    return ExperimentPlan(
+        spec=spec,
+        setups=_resolve_setups(spec, sweep),
+        axis=tuple(k for k, levels in sweep if len(levels) > 1),
+    )
+
+
+@dataclass(frozen=True, kw_only=True)
+class ExperimentPlan:
+    """An experiment resolved once: its spec (as validated, for its hash and the store), its setups
+    and the swept keys. The runner, the summary and the report read only this; the store keeps it,
+    so a report needs nothing else (and shows what was run even after the defaults change)."""
+
+    spec: ExperimentSpec
+    setups: tuple[Setup, ...]
+    axis: tuple[str, ...]  # the keys that take more than one level: the result tables' axes
+
+    @property
+    def name(self) -> str:
+        return self.spec.name
+
+    @property
+    def output_dir(self) -> Path:
+        return self.spec.output_dir
+
+    def with_output(self, output: str | Path) -> ExperimentPlan:
+        """The same plan writing its results to ``output``."""
+        return dataclasses.replace(self, spec=dataclasses.replace(self.spec, output=str(output)))
+
+    def gallery_key(self, town: str) -> str:
+        """What determines a town's gallery: the town, the route, the drive and the scene
+        version."""
+        s = self.spec
+        return config_hash(
+            (to_dict(_town_spec(town)), s.route_length_m, s.gallery, SCENE_VERSION), 10
+        )
+
+    def tasks(self, map_dirs: Mapping[tuple[str, str], str]) -> list[EpisodeTask]:
+        """Every episode, keyed; ``map_dirs[(town, method name)]`` gives the maps. Baseline
+        episodes are listed once per distinct key (setups that differ only in appearance share
+        one)."""
+        tasks: dict[str, EpisodeTask] = {}
+        for town in self.spec.towns:
+            town_dict = to_dict(_town_spec(town))
+            for setup in self.setups:
+                for kind, method, rep in self._jobs():
+                    task = self._task(town, town_dict, setup, kind, method, rep, map_dirs)
+                    tasks.setdefault(task.key, task)
+        return list(tasks.values())
+
+    def _jobs(self) -> list[tuple[EpisodeKind, MethodSpec | None, int]]:
+        s = self.spec
+        jobs: list[tuple[EpisodeKind, MethodSpec | None, int]] = []
+        for method in s.methods:
+            if s.recall:
+                jobs.append(("recall", method, 0))
+            if s.failure:
+                jobs += [("failure", method, r) for r in range(s.repetitions)]
+        if s.baseline:
+            jobs += [("baseline", None, r) for r in range(s.repetitions)]
+        return jobs
+
+    def _task(self, town: str, town_dict: dict[str, Any], setup: Setup, kind: EpisodeKind,
+              method: MethodSpec | None, rep: int,
+              map_dirs: Mapping[tuple[str, str], str]) -> EpisodeTask:  # fmt: skip
+        config = dataclasses.replace(
+            setup.episode,
+            mode="ground_truth" if kind == "recall" else "navigate",
+            seed=self.spec.seed + rep,
+        )
+        map_dir = map_dirs[(town, method.name)] if method else None
+        world = (
+            {"traffic": setup.conditions.traffic}
+            if method is None  # the baseline renders nothing
+            else {"conditions": setup.conditions, "cameras": setup.cameras}
+        )
+        key = config_hash(
+            {
+                "kind": kind,
+                "town": town_dict,
+                "scene": SCENE_VERSION,
+                "episode_version": EPISODE_VERSION,
+                "route_length_m": self.spec.route_length_m,
+                "world": world,
+                "method": method,
+                "map": Path(map_dir).name if map_dir else None,
+                "gallery": Path(map_dir).parent.name if map_dir else None,
+                "episode": config,
+            },
+            16,
+        )
+        return EpisodeTask(
+            kind=kind, town=town, setup=setup, method=method, map_dir=map_dir, repetition=rep,
+            episode=config, route_length_m=self.spec.route_length_m, key=key,
+        )  # fmt: skip
+
+
+def plan_from_stored(data: dict[str, Any]) -> ExperimentPlan:
+    """The plan a run stored (``to_dict`` of it); a run stored before plans were kept holds the
+    spec alone, which is resolved again."""
+    if "setups" in data:
+        return from_dict(ExperimentPlan, data)
+    return load_experiment({**data, "sweep": {k: v for k, v in data.get("sweep", [])}})
 
 
 def _set(tree: dict[str, Any], dotted: str, value: Any) -> None:
@@ -249,110 +359,70 @@ def _camera(base: Camera, overrides: Any, name: str, field: str) -> Camera:
     if not isinstance(overrides, dict):
         raise ConfigError(field, "expected a mapping of camera settings")
     merged = {**to_dict(base), "name": name}
-    for k, v in overrides.items():
-        merged[k] = (
-            {**merged[k], **v} if isinstance(v, dict) and isinstance(merged.get(k), dict) else v
-        )
+    _merge(merged, overrides)
     return from_dict(Camera, merged, field)
 
 
-def setups(spec: ExperimentSpec) -> list[Setup]:
-    """The cartesian product of the swept keys, as resolved setups (validated)."""
+def _sweep_levels(spec: ExperimentSpec) -> list[tuple[str, list[Any]]]:
+    """Each sweep key with its levels, in the file's order (validated keys)."""
     keys = []
     for key, value in spec.sweep:
         root = key.split(".")[0]
         if root not in SWEEP_ROOTS:
             raise UnknownNameError("sweep key", key, SWEEP_ROOTS)
+        if key in _PER_TASK_EPISODE_KEYS or key == "episode":
+            raise ConfigError(f"sweep.{key}", "is set per episode by its kind and repetition")
         keys.append((key, _levels(key, value)))
-    swept = [k for k, levels in keys if len(levels) > 1]
+    return keys
+
+
+def _resolve_setups(spec: ExperimentSpec, sweep: list[tuple[str, list[Any]]]) -> tuple[Setup, ...]:
+    """The cartesian product of the swept keys, as resolved setups (validated)."""
+    swept = [k for k, levels in sweep if len(levels) > 1]
     out = []
-    for combo in itertools.product(*(levels for _, levels in keys)):
+    for combo in itertools.product(*(levels for _, levels in sweep)):
         tree: dict[str, Any] = {}
-        for (key, _), value in zip(keys, combo):
+        for (key, _), value in zip(sweep, combo):
             _set(tree, key, copy.deepcopy(value))
-        cams = tree.pop("cameras", None)
-        cam = tree.pop("camera", None)
-        require(cams is None or cam is None, "sweep", "set either camera or cameras, not both")
+        episode = _episode(spec.episode, tree.pop("episode", None))
+        cameras = _cameras(spec.gallery.camera, tree.pop("cameras", None), tree.pop("camera", None))
         conditions = from_dict(Conditions, tree, "sweep")
-        if cams is not None:
-            if not isinstance(cams, list) or not cams:
-                raise ConfigError("sweep.cameras", "expected a list of cameras (a rig)")
-            cameras = tuple(
-                _camera(spec.gallery.camera, c, f"cam{i}", f"sweep.cameras[{i}]")
-                for i, c in enumerate(cams)
-            )
-            names = [c.name for c in cameras]
-            require(len(set(names)) == len(names), "sweep.cameras", f"duplicate names {names}")
-        else:
-            cameras = (_camera(spec.gallery.camera, {"name": "query", **(cam or {})}, "query",
-                               "sweep.camera"),)  # fmt: skip
-        levels = tuple((k, v) for (k, _), v in zip(keys, combo) if k in swept)
+        levels = tuple((k, v) for (k, _), v in zip(sweep, combo) if k in swept)
         label = ", ".join(_label(k, v) for k, v in levels) or "default"
-        out.append(Setup(label, levels, conditions, cameras))
+        out.append(Setup(label=label, levels=levels, conditions=conditions, cameras=cameras,
+                         episode=episode))  # fmt: skip
     labels = [s.label for s in out]
     require(len(set(labels)) == len(labels), "sweep", "two setups have the same levels")
-    return out
+    return tuple(out)
 
 
-def gallery_key(town: str, spec: ExperimentSpec) -> str:
-    """What determines a town's gallery: the town, the route, the drive and the scene version."""
-    return config_hash(
-        (to_dict(_town_spec(town)), spec.route_length_m, spec.gallery, SCENE_VERSION), 10
+def _episode(base: EpisodeConfig, overrides: dict[str, Any] | None) -> EpisodeConfig:
+    """``base`` with the swept ``episode.*`` values set (nested configs merged)."""
+    if not overrides:
+        return base
+    merged = to_dict(base)
+    _merge(merged, overrides)
+    return from_dict(EpisodeConfig, merged, "sweep.episode")
+
+
+def _merge(tree: dict[str, Any], overrides: dict[str, Any]) -> None:
+    for k, v in overrides.items():
+        if isinstance(v, dict) and isinstance(tree.get(k), dict):
+            _merge(tree[k], v)
+        else:
+            tree[k] = v
+
+
+def _cameras(gallery: Camera, cams: Any, cam: Any) -> tuple[Camera, ...]:
+    """The query rig: ``cameras`` (a list), or the gallery camera with ``camera``'s changes."""
+    require(cams is None or cam is None, "sweep", "set either camera or cameras, not both")
+    if cams is None:
+        return (_camera(gallery, {"name": "query", **(cam or {})}, "query", "sweep.camera"),)
+    if not isinstance(cams, list) or not cams:
+        raise ConfigError("sweep.cameras", "expected a list of cameras (a rig)")
+    cameras = tuple(
+        _camera(gallery, c, f"cam{i}", f"sweep.cameras[{i}]") for i, c in enumerate(cams)
     )
-
-
-def expand(spec: ExperimentSpec, map_dirs: Mapping[tuple[str, str], str]) -> list[EpisodeTask]:
-    """Every episode of the experiment, keyed; ``map_dirs[(town, method name)]`` gives the maps.
-
-    Baseline episodes are listed once per distinct key (setups that differ only in appearance
-    share one).
-    """
-    tasks: dict[str, EpisodeTask] = {}
-    for town in spec.towns:
-        town_dict = to_dict(_town_spec(town))
-        for setup in setups(spec):
-            jobs: list[tuple[EpisodeKind, MethodSpec | None, int]] = []
-            for method in spec.methods:
-                if spec.recall:
-                    jobs.append(("recall", method, 0))
-                if spec.failure:
-                    jobs += [("failure", method, r) for r in range(spec.repetitions)]
-            if spec.baseline:
-                jobs += [("baseline", None, r) for r in range(spec.repetitions)]
-            for kind, method, rep in jobs:
-                config = dataclasses.replace(
-                    spec.episode,
-                    mode="ground_truth" if kind == "recall" else "navigate",
-                    seed=spec.seed + rep,
-                )
-                map_dir = map_dirs[(town, method.name)] if method else None
-                world = (
-                    {"traffic": setup.conditions.traffic}
-                    if method is None  # the baseline renders nothing
-                    else {"conditions": setup.conditions, "cameras": setup.cameras}
-                )
-                key = config_hash(
-                    {
-                        "kind": kind,
-                        "town": town_dict,
-                        "scene": SCENE_VERSION,
-                        "episode_version": EPISODE_VERSION,
-                        "route_length_m": spec.route_length_m,
-                        "world": world,
-                        "method": method,
-                        "map": Path(map_dir).name if map_dir else None,
-                        "gallery": Path(map_dir).parent.name if map_dir else None,
-                        "episode": config,
-                    },
-                    16,
-                )
-                task = EpisodeTask(
-                    kind, town, setup, method, map_dir, rep, config, spec.route_length_m, key
-                )
-                tasks.setdefault(key, task)
-    return list(tasks.values())
-
-
-def sweep_keys(spec: ExperimentSpec) -> list[str]:
-    """The keys that take more than one level (the axes of the result tables)."""
-    return [k for k, v in spec.sweep if len(_levels(k, v)) > 1]
+    names = [c.name for c in cameras]
+    require(len(set(names)) == len(names), "sweep.cameras", f"duplicate names {names}")
+    return cameras

@@ -26,9 +26,10 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
+from vlocbench.bench.experiment import plan_from_stored
 from vlocbench.bench.paper import FACTOR_OF_AXIS, PaperTable, paper_results, shape
 from vlocbench.bench.store import read_latest_run
-from vlocbench.bench.summary import BASELINE, Cell, Summary, spec_from_stored, summarize
+from vlocbench.bench.summary import BASELINE, Cell, Summary, summarize
 
 REPORT_DIR = "report"
 COLORS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2", "#17becf")
@@ -474,22 +475,20 @@ def example_images(
             ".jpg", cv2.cvtColor(small, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, 85]
         )[1].tobytes()
 
-    out = []
-    sim = Simulator(town_named(town), spec.gallery.conditions)
-    try:
+    with Simulator(town_named(town), spec.gallery.conditions) as sim:
         sim.teleport(*pose)
         gallery_view = jpeg(sim.render([spec.gallery.camera])[0].image)
-        for s in summary.setups:
-            if s.conditions.traffic != sim.conditions.traffic:
-                sim.close()
-                sim = Simulator(town_named(town), s.conditions)
-            else:
+    out = []
+    # one scene per traffic level (its cars are part of it), in the setups' order
+    for traffic in dict.fromkeys(s.conditions.traffic for s in summary.setups):
+        group = [s for s in summary.setups if s.conditions.traffic == traffic]
+        with Simulator(town_named(town), group[0].conditions) as sim:
+            for s in group:
                 sim.set_conditions(s.conditions)
-            sim.teleport(*pose)
-            out.append((s.label, jpeg(sim.render(s.cameras[:1])[0].image), gallery_view))
-    finally:
-        sim.close()
-    return out
+                sim.teleport(*pose)
+                out.append((s.label, jpeg(sim.render(s.cameras[:1])[0].image), gallery_view))
+    order = {s.label: k for k, s in enumerate(summary.setups)}
+    return sorted(out, key=lambda item: order[item[0]])
 
 
 # -- the report -----------------------------------------------------------------------------------
@@ -519,7 +518,7 @@ def write_report(output_dir: str | Path, examples: bool = True) -> ReportFiles:
     from vlocbench.bench.towns import town_named
 
     stored, rows = read_latest_run(output_dir)
-    summary = summarize(spec_from_stored(stored), rows)
+    summary = summarize(plan_from_stored(stored), rows)
     out = Path(output_dir) / REPORT_DIR
     out.mkdir(parents=True, exist_ok=True)
     tables = _tables(summary)

@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from vlocbench.bench.episode import run_episode
-from vlocbench.bench.experiment import EpisodeTask, ExperimentSpec, expand, gallery_key, setups
+from vlocbench.bench.experiment import EpisodeTask, ExperimentPlan
 from vlocbench.bench.gallery_capture import capture_gallery
 from vlocbench.bench.metrics import episode_metrics
 from vlocbench.bench.records import EpisodeResult
@@ -137,19 +137,20 @@ def run_task(task: EpisodeTask) -> EpisodeOutcome:
     return EpisodeOutcome(task.key, result, time.perf_counter() - t)
 
 
-def _worker_init() -> None:
+def _worker_init(driver_pid: int) -> None:
     # one process per core: OpenMP threads spinning against each other make torch crawl. Set
     # before torch is imported (by the first localizer), which reads it then.
     os.environ["OMP_NUM_THREADS"] = "1"
     # Ctrl-C reaches the whole process group: the driver alone handles it (it stops the workers)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    threading.Thread(target=_exit_with_parent, args=(os.getppid(),), daemon=True).start()
+    threading.Thread(target=_exit_with_driver, args=(driver_pid,), daemon=True).start()
 
 
-def _exit_with_parent(parent_pid: int, period_s: float = 1.0) -> None:
+def _exit_with_driver(driver_pid: int, period_s: float = 1.0) -> None:
     """A pool worker's watchdog: a driver killed outright (``kill -9``) cannot stop its workers,
-    so each stops itself once it has been handed to another parent."""
-    while os.getppid() == parent_pid:
+    so each stops itself once it is no longer the driver's child (also when the driver died
+    while the worker was still starting)."""
+    while os.getppid() == driver_pid:
         time.sleep(period_s)
     os._exit(1)
 
@@ -179,8 +180,9 @@ class _StageBars:
         self.bars.clear()
 
 
-def prepare_maps(spec: ExperimentSpec, progress: bool = False) -> dict[tuple[str, str], str]:
+def prepare_maps(plan: ExperimentPlan, progress: bool = False) -> dict[tuple[str, str], str]:
     """Capture each town's gallery and build each method's map, unless the cache has them."""
+    spec = plan.spec
     cache = Path(spec.cache).resolve()
     out: dict[tuple[str, str], str] = {}
     if not (spec.recall or spec.failure):
@@ -188,16 +190,16 @@ def prepare_maps(spec: ExperimentSpec, progress: bool = False) -> dict[tuple[str
     bars = _StageBars(progress)
     try:
         for town_name in spec.towns:
-            out.update(_prepare_town(spec, town_name, cache, bars))
+            out.update(_prepare_town(plan, town_name, cache, bars))
     finally:
         bars.close()
     return out
 
 
-def _prepare_town(spec: ExperimentSpec, town_name: str, cache: Path,
+def _prepare_town(plan: ExperimentPlan, town_name: str, cache: Path,
                   bars: _StageBars) -> dict[tuple[str, str], str]:  # fmt: skip
-    town = town_named(town_name)
-    gallery_dir = cache / "galleries" / f"{town.name}-{gallery_key(town_name, spec)}"
+    spec, town = plan.spec, town_named(town_name)
+    gallery_dir = cache / "galleries" / f"{town.name}-{plan.gallery_key(town_name)}"
     if not (gallery_dir / GALLERY_FILE).exists():
         logger.info(f"{town.name}: capturing the gallery in {gallery_dir}")
         t = time.perf_counter()
@@ -341,7 +343,10 @@ def _run_inline(tasks: list[EpisodeTask], runner: Runner, record: _Recorder) -> 
 
 def _local_pool(workers: int) -> cf.ProcessPoolExecutor:
     return cf.ProcessPoolExecutor(
-        workers, mp_context=multiprocessing.get_context("spawn"), initializer=_worker_init
+        workers,
+        mp_context=multiprocessing.get_context("spawn"),
+        initializer=_worker_init,
+        initargs=(os.getpid(),),
     )
 
 
@@ -491,29 +496,29 @@ def _dask_client(scheduler: str) -> Any:
 
 
 def run_experiment(
-    spec: ExperimentSpec,
+    plan: ExperimentPlan,
     workers: int = 1,
     scheduler: str | None = None,
     progress: bool = True,
     runner: Runner = run_task,
 ) -> RunSummary:
-    """Run what the store of ``spec.output_dir`` does not have yet; returns the counts."""
+    """Run what the store of ``plan.output_dir`` does not have yet; returns the counts."""
     _check_workers(workers)  # before hours of gallery and map building, not after
     t0 = time.perf_counter()
-    with ResultStore(spec.output_dir, spec.name) as store:
-        maps = prepare_maps(spec, progress)
-        tasks = expand(spec, maps)
-        store.start_run(spec.spec_hash, to_dict(spec), [t.key for t in tasks])
+    with ResultStore(plan.output_dir, plan.name) as store:
+        maps = prepare_maps(plan, progress)
+        tasks = plan.tasks(maps)
+        store.start_run(plan.spec.spec_hash, to_dict(plan), [t.key for t in tasks])
         done = store.done_keys()
         todo = [t for t in tasks if t.key not in done]
         logger.info(
-            f"{spec.name}: {len(tasks)} episodes over {len(setups(spec))} setup(s); "
+            f"{plan.name}: {len(tasks)} episodes over {len(plan.setups)} setup(s); "
             f"{len(tasks) - len(todo)} already done, {len(todo)} to run"
         )
         t1 = time.perf_counter()
         e = execute(_order(todo), store, workers, scheduler, runner, progress=progress)
         return RunSummary(
-            output_dir=spec.output_dir,
+            output_dir=plan.output_dir,
             total=len(tasks),
             skipped=len(tasks) - len(todo),
             finished=e.finished,

@@ -8,6 +8,7 @@ share its key (the same traffic) share its cell.
 
 from __future__ import annotations
 
+import json
 from collections import defaultdict
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -15,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from vlocbench.bench.experiment import ExperimentSpec, Setup, load_experiment, setups, sweep_keys
+from vlocbench.bench.experiment import ExperimentPlan, ExperimentSpec, Setup
 from vlocbench.bench.metrics import (
     FailureRate,
     Fragmentation,
@@ -31,7 +32,7 @@ from vlocbench.config import to_dict
 BASELINE = "odometry"
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Cell:
     town: str
     method: str
@@ -53,9 +54,9 @@ class Cell:
     keys: frozenset[str]  # the episodes behind this cell (a baseline's serve several setups)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Summary:
-    spec: ExperimentSpec
+    plan: ExperimentPlan
     towns: tuple[str, ...]  # as given in the experiment (names or YAML paths)
     town_names: dict[str, str]  # as given -> the town's name
     methods: tuple[str, ...]  # the experiment's methods, then BASELINE when it ran
@@ -63,6 +64,10 @@ class Summary:
     axis: tuple[str, ...]  # the swept keys
     cells: dict[tuple[str, str, str], Cell]  # (town, method, setup label)
     errors: tuple[EpisodeRow, ...]
+
+    @property
+    def spec(self) -> ExperimentSpec:
+        return self.plan.spec
 
     def cell(self, town: str, method: str, setup: str) -> Cell | None:
         return self.cells.get((town, method, setup))
@@ -77,29 +82,32 @@ class Summary:
         return None
 
 
-def spec_from_stored(data: dict[str, Any]) -> ExperimentSpec:
-    """The experiment as the store recorded it (``to_dict`` of the resolved spec)."""
-    data = dict(data)
-    data["sweep"] = {k: v for k, v in data.get("sweep", [])}
-    return load_experiment(data)
-
-
 def _mean(values: Sequence[float]) -> float:
     finite = [v for v in values if v is not None and np.isfinite(v)]
     return float(np.mean(finite)) if finite else float("nan")
 
 
-def summarize(spec: ExperimentSpec, rows: Sequence[EpisodeRow]) -> Summary:
+def _baseline_drive(traffic: dict[str, Any], episode: dict[str, Any]) -> str:
+    """What an odometry-only drive depends on among a setup's settings: the traffic and the
+    episode config (its seed and mode are set per repetition)."""
+    settings = {k: v for k, v in episode.items() if k not in ("seed", "mode")}
+    return json.dumps([traffic, settings], sort_keys=True)
+
+
+def summarize(plan: ExperimentPlan, rows: Sequence[EpisodeRow]) -> Summary:
     """Aggregate ``rows`` (one run's episodes) by town, method and setup."""
-    the_setups = setups(spec)
+    spec, the_setups = plan.spec, plan.setups
     ok = [r for r in rows if r.status == "ok" and r.metrics is not None]
     by: dict[tuple[str, str, str], list[EpisodeRow]] = defaultdict(list)
-    traffic_of = {s.label: to_dict(s.conditions.traffic) for s in the_setups}
+    drive_of = {
+        s.label: _baseline_drive(to_dict(s.conditions.traffic), to_dict(s.episode))
+        for s in the_setups
+    }
     for r in ok:
-        if r.method == BASELINE:  # a baseline serves every setup with its traffic
-            traffic = r.config["setup"]["conditions"]["traffic"]
+        if r.method == BASELINE:  # a baseline serves every setup with its traffic and settings
+            drive = _baseline_drive(r.config["setup"]["conditions"]["traffic"], r.config["episode"])
             for s in the_setups:
-                if traffic_of[s.label] == traffic:
+                if drive_of[s.label] == drive:
                     by[(r.config["town"], BASELINE, s.label)].append(r)
         else:
             by[(r.config["town"], r.method, r.setup)].append(r)
@@ -112,8 +120,11 @@ def summarize(spec: ExperimentSpec, rows: Sequence[EpisodeRow]) -> Summary:
         fail = [r.metrics for r in group if r.kind in ("failure", "baseline")]
         rec = [r.metrics for r in group if r.kind == "recall"]
         sites = [s for m in fail for s in m["failure_sites_s_m"]]
+        town, method, setup = key
         cells[key] = Cell(
-            *key,
+            town=town,
+            method=method,
+            setup=setup,
             failure=failure_rate([m["failures_per_km"] for m in fail]) if fail else None,
             failure_by_cause=failure_rate_by_cause(
                 [m["failure_causes"] for m in fail], [m["route_covered_m"] for m in fail]
@@ -135,6 +146,12 @@ def summarize(spec: ExperimentSpec, rows: Sequence[EpisodeRow]) -> Summary:
     methods = tuple(m.name for m in spec.methods) + ((BASELINE,) if spec.baseline else ())
     town_names = {t: t for t in spec.towns} | {r.config["town"]: r.town for r in rows}
     return Summary(
-        spec, spec.towns, town_names, methods, tuple(the_setups), tuple(sweep_keys(spec)), cells,
-        tuple(r for r in rows if r.status != "ok"),
-    )  # fmt: skip
+        plan=plan,
+        towns=spec.towns,
+        town_names=town_names,
+        methods=methods,
+        setups=the_setups,
+        axis=plan.axis,
+        cells=cells,
+        errors=tuple(r for r in rows if r.status != "ok"),
+    )
