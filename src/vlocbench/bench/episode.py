@@ -308,44 +308,54 @@ class Episode:
         c = self.config
         wall0 = time.perf_counter()
         self._restart_at(0, 0.0)
-        navigate = c.mode == "navigate"
         limit_s = c.time_limit_factor * self.path.length_m / c.controller.target_speed_mps + 60.0
         step, t = 0, 0.0
         while not self.progress.finished and t < limit_s:
-            state = self.sim.state
-            if self.localizer is not None and t >= self.next_query_s - 1e-9:
-                self._query(t, state)
-            self._deliver(t)
-            ekf_pose = self._ekf_pose()
-            if c.record_trajectory:
-                self.columns.add(t, state, ekf_pose)
-            if navigate:
-                x, y, yaw = ekf_pose
-                speed = self.ekf.speed_mps if c.speed_source == "ekf" else state.speed_mps
-            else:  # the paper's recall drive: on the true pose and speed
-                x, y, yaw, speed = state.x_m, state.y_m, state.yaw_rad, state.speed_mps
-            target = self.planner.step(np.array([x, y]), speed)
-            cmd = self.controller.step(x, y, yaw, speed, target.xy, target.remaining_m)
-            result = self.sim.step(cmd)
             step += 1
+            self._step(t, step * self.dt_s)
             t = step * self.dt_s
-            new = result.state
-            self.distance_m += float(np.hypot(new.x_m - state.x_m, new.y_m - state.y_m))
-            self.ekf.predict(self._odometry(state, new), self.dt_s)
-            proj = self.progress.update(np.array([new.x_m, new.y_m]))
-            self.offsets_m.append(proj.distance_m)
-            failure = next(
-                (
-                    f
-                    for e in result.collisions
-                    if (f := self.detector.collision(t, e.x_m, e.y_m, f"{e.category} {e.label}"))
-                ),
-                None,
-            ) or self.detector.check(t, new.x_m, new.y_m, new.speed_mps, proj.distance_m)
-            if failure is not None and not self.progress.finished:
-                self._fail(failure, t)
-            if not navigate:
-                self._check_lock(t, new)
+        return self._finish(t, time.perf_counter() - wall0)
+
+    def _step(self, t: float, t_next: float) -> None:
+        """One simulation step from ``t``: localize when due, steer, move, fuse the odometry,
+        detect failures."""
+        c = self.config
+        state = self.sim.state
+        if self.localizer is not None and t >= self.next_query_s - 1e-9:
+            self._query(t, state)
+        self._deliver(t)
+        ekf_pose = self._ekf_pose()
+        if c.record_trajectory:
+            self.columns.add(t, state, ekf_pose)
+        if c.mode == "navigate":
+            x, y, yaw = ekf_pose
+            speed = self.ekf.speed_mps if c.speed_source == "ekf" else state.speed_mps
+        else:  # the paper's recall drive: on the true pose and speed
+            x, y, yaw, speed = state.x_m, state.y_m, state.yaw_rad, state.speed_mps
+        target = self.planner.step(np.array([x, y]), speed)
+        cmd = self.controller.step(x, y, yaw, speed, target.xy, target.remaining_m)
+        result = self.sim.step(cmd)
+        new = result.state
+        self.distance_m += float(np.hypot(new.x_m - state.x_m, new.y_m - state.y_m))
+        self.ekf.predict(self._odometry(state, new), self.dt_s)
+        proj = self.progress.update(np.array([new.x_m, new.y_m]))
+        self.offsets_m.append(proj.distance_m)
+        failure = next(
+            (
+                f
+                for e in result.collisions
+                if (f := self.detector.collision(t_next, e.x_m, e.y_m, f"{e.category} {e.label}"))
+            ),
+            None,
+        ) or self.detector.check(t_next, new.x_m, new.y_m, new.speed_mps, proj.distance_m)
+        if failure is not None and not self.progress.finished:
+            self._fail(failure, t_next)
+        if c.mode != "navigate":
+            self._check_lock(t_next, new)
+
+    def _finish(self, t: float, wall_s: float) -> EpisodeResult:
+        """The episode's result once it ended at ``t`` (the goal, or out of time)."""
+        c = self.config
         if c.record_trajectory:
             self.columns.add(t, self.sim.state, self._ekf_pose())
         for p in self.in_flight:
@@ -364,7 +374,7 @@ class Episode:
             distance_driven_m=self.distance_m,
             completed=self.progress.finished,
             sim_time_s=t,
-            wall_time_s=time.perf_counter() - wall0,
+            wall_time_s=wall_s,
             reinitializations=tuple(self.reinits),
             lock_losses_s=tuple(self.lock_losses_s),
             segments=tuple(self.segments),

@@ -15,8 +15,10 @@ from __future__ import annotations
 import base64
 import html
 import logging
+import string
 from collections.abc import Sequence
 from dataclasses import dataclass
+from importlib import resources
 from pathlib import Path
 from typing import Any, Literal
 
@@ -28,7 +30,7 @@ import numpy as np
 
 from vlocbench.bench.experiment import plan_from_stored
 from vlocbench.bench.paper import FACTOR_OF_AXIS, PaperTable, paper_results, shape
-from vlocbench.bench.store import read_latest_run
+from vlocbench.bench.store import EpisodeRow, read_latest_run
 from vlocbench.bench.summary import BASELINE, Cell, Summary, summarize
 
 REPORT_DIR = "report"
@@ -224,62 +226,71 @@ def paper_comparison_tables(summary: Summary) -> list[tuple[str, Table]]:
     table = _paper_table(summary)
     if table is None:
         return []
-    paper = paper_results()
-    out = []
     ours_levels = [_paper_level(table.factor, s.levels[0][1]) for s in summary.setups]
+    out = []
     for town in summary.towns:
         name = summary.town_names[town]
         if name not in table.failure_rate:
             continue
-        odo_cell = _baseline_cell(summary, town)
-        odo = odo_cell.failure.mean if odo_cell and odo_cell.failure else float("nan")
-        paper_odo = paper.odometry_failure_rate[name]
-        shared = [lv for lv in table.levels if lv in ours_levels]
-        header = ["source", "method", *(_level_text(lv) for lv in shared)]
-        rows = []
-        for method in summary.methods:
-            f, _ = _ours(summary, town, method)
-            rows.append(
-                [
-                    "vlocbench",
-                    _method_label(method),
-                    *(_fmt(f[ours_levels.index(lv)]) for lv in shared),
-                ]
-            )
-        for method, f in table.failure_rate[name].items():
-            rows.append(["paper", method, *(_fmt(f[table.levels.index(lv)]) for lv in shared)])
-        rows.append(["paper", "odometry only", *(_fmt(paper_odo) for _ in shared)])
-        out.append((f"{name}: failure rate F (failures/km) beside the paper's ({paper.citation})",
-                    (header, rows)))  # fmt: skip
+        out.append(_paper_failure_table(summary, town, table, ours_levels))
         if table.recall_t1:
-            shared_r = [lv for lv in table.recall_levels if lv in ours_levels]
-            header = ["source", "method", *(_level_text(lv) for lv in shared_r)]
-            rows = []
-            for method in (m for m in summary.methods if m != BASELINE):
-                _, t1 = _ours(summary, town, method)
-                rows.append(["vlocbench", method,
-                             *(_fmt(t1[ours_levels.index(lv)]) for lv in shared_r)])  # fmt: skip
-            for method, t1 in table.recall_t1[name].items():
-                rows.append(["paper", method,
-                             *(_fmt(t1[table.recall_levels.index(lv)]) for lv in shared_r)])  # fmt: skip
-            out.append((f"{name}: T1 recall (%, 6-DoF, ground-truth drive) beside the paper's",
-                        (header, rows)))  # fmt: skip
-        header = ["source", "method", "F easiest", "Spearman(F, level)", "F reaches odometry at",
-                  "F above odometry up to T1 (%)"]  # fmt: skip
-        rows = []
-        for method in (m for m in summary.methods if m != BASELINE):
-            f, t1 = _ours(summary, town, method)
-            rows.append(["vlocbench", method, *_shape_cells(shape(f, odo, None, t1), ours_levels)])
-        for method, f in table.failure_rate[name].items():
-            t1_by_level = dict(
-                zip(table.recall_levels, table.recall_t1.get(name, {}).get(method, ()))
-            )
-            t1 = [t1_by_level.get(lv, float("nan")) for lv in table.levels]
-            rows.append(["paper", method,
-                         *_shape_cells(shape(f, paper_odo, None, t1), list(table.levels))])  # fmt: skip
-        out.append((f"{name}: shape of F over the levels, ours (odometry only {_fmt(odo)}/km) and "
-                    f"the paper's ({_fmt(paper_odo)}/km)", (header, rows)))  # fmt: skip
+            out.append(_paper_recall_table(summary, town, table, ours_levels))
+        out.append(_paper_shape_table(summary, town, table, ours_levels))
     return out
+
+
+def _paper_failure_table(summary: Summary, town: str, table: PaperTable,
+                         ours_levels: list[Any]) -> tuple[str, Table]:  # fmt: skip
+    name, paper = summary.town_names[town], paper_results()
+    shared = [lv for lv in table.levels if lv in ours_levels]
+    header = ["source", "method", *(_level_text(lv) for lv in shared)]
+    rows = []
+    for method in summary.methods:
+        f, _ = _ours(summary, town, method)
+        rows.append(["vlocbench", _method_label(method),
+                     *(_fmt(f[ours_levels.index(lv)]) for lv in shared)])  # fmt: skip
+    for method, f in table.failure_rate[name].items():
+        rows.append(["paper", method, *(_fmt(f[table.levels.index(lv)]) for lv in shared)])
+    rows.append(["paper", "odometry only",
+                 *(_fmt(paper.odometry_failure_rate[name]) for _ in shared)])  # fmt: skip
+    return (f"{name}: failure rate F (failures/km) beside the paper's ({paper.citation})",
+            (header, rows))  # fmt: skip
+
+
+def _paper_recall_table(summary: Summary, town: str, table: PaperTable,
+                        ours_levels: list[Any]) -> tuple[str, Table]:  # fmt: skip
+    name = summary.town_names[town]
+    shared = [lv for lv in table.recall_levels if lv in ours_levels]
+    header = ["source", "method", *(_level_text(lv) for lv in shared)]
+    rows = []
+    for method in (m for m in summary.methods if m != BASELINE):
+        _, t1 = _ours(summary, town, method)
+        rows.append(["vlocbench", method, *(_fmt(t1[ours_levels.index(lv)]) for lv in shared)])
+    for method, t1 in table.recall_t1[name].items():
+        rows.append(["paper", method,
+                     *(_fmt(t1[table.recall_levels.index(lv)]) for lv in shared)])  # fmt: skip
+    return f"{name}: T1 recall (%, 6-DoF, ground-truth drive) beside the paper's", (header, rows)
+
+
+def _paper_shape_table(summary: Summary, town: str, table: PaperTable,
+                       ours_levels: list[Any]) -> tuple[str, Table]:  # fmt: skip
+    name = summary.town_names[town]
+    odo_cell = _baseline_cell(summary, town)
+    odo = odo_cell.failure.mean if odo_cell and odo_cell.failure else float("nan")
+    paper_odo = paper_results().odometry_failure_rate[name]
+    header = ["source", "method", "F easiest", "Spearman(F, level)", "F reaches odometry at",
+              "F above odometry up to T1 (%)"]  # fmt: skip
+    rows = []
+    for method in (m for m in summary.methods if m != BASELINE):
+        f, t1 = _ours(summary, town, method)
+        rows.append(["vlocbench", method, *_shape_cells(shape(f, odo, None, t1), ours_levels)])
+    for method, f in table.failure_rate[name].items():
+        t1_by_level = dict(zip(table.recall_levels, table.recall_t1.get(name, {}).get(method, ())))
+        t1 = [t1_by_level.get(lv, float("nan")) for lv in table.levels]
+        rows.append(["paper", method,
+                     *_shape_cells(shape(f, paper_odo, None, t1), list(table.levels))])  # fmt: skip
+    return (f"{name}: shape of F over the levels, ours (odometry only {_fmt(odo)}/km) and the "
+            f"paper's ({_fmt(paper_odo)}/km)", (header, rows))  # fmt: skip
 
 
 def _level_text(level: Any) -> str:
@@ -507,21 +518,43 @@ def _img(data: bytes, mime: str, alt: str) -> str:
     )
 
 
-_CSS = """body{font-family:system-ui,sans-serif;max-width:1100px;margin:2em auto;padding:0 1em;color:#222}
-table{border-collapse:collapse;margin:.5em 0 1.5em;font-size:13px}th,td{border:1px solid #ccc;padding:3px 7px;text-align:center}
-th{background:#f3f3f3}td:first-child{text-align:left}img{max-width:100%}figure{display:inline-block;margin:4px}
-figcaption{font-size:12px;color:#555}.err{color:#b00}pre{background:#f7f7f7;padding:.5em;font-size:12px;overflow-x:auto}"""
+def _page_template() -> string.Template:
+    return string.Template(
+        resources.files("vlocbench.bench.data").joinpath("report.html").read_text()
+    )
 
 
-def write_report(output_dir: str | Path, examples: bool = True) -> ReportFiles:
-    """Write the tables, figures and the HTML page of the latest run in ``output_dir``."""
-    from vlocbench.bench.towns import town_named
+def _figure_html(data: bytes, mime: str, caption: str) -> str:
+    return f"<figure>{_img(data, mime, caption)}<figcaption>{html.escape(caption)}</figcaption></figure>"
 
-    stored, rows = read_latest_run(output_dir)
-    summary = summarize(plan_from_stored(stored), rows)
-    out = Path(output_dir) / REPORT_DIR
-    out.mkdir(parents=True, exist_ok=True)
-    tables = _tables(summary)
+
+def _examples_html(summary: Summary) -> str:
+    parts = ["<h2>Query images and the gallery view from the same pose</h2>"]
+    for town in summary.towns:
+        name = summary.town_names[town]
+        logger.info(f"report: rendering example images of {name}")
+        for label, query, gallery in example_images(summary, town):
+            parts.append(
+                f"<div><h4>{html.escape(name)}: {html.escape(label)}</h4>"
+                + _figure_html(query, "image/jpeg", "query")
+                + _figure_html(gallery, "image/jpeg", "gallery")
+                + "</div>"
+            )
+    return "\n".join(parts)
+
+
+def _errors_html(errors: Sequence[EpisodeRow]) -> str:
+    if not errors:
+        return ""
+    parts = ["<h2 class='err'>Episodes that ended in an error</h2>"]
+    for r in errors:
+        what = f"{r.town} {r.method} {r.kind} {r.setup} rep {r.repetition}"
+        parts.append(f"<p>{html.escape(what)}</p><pre>{html.escape(r.error or '')}</pre>")
+    return "\n".join(parts)
+
+
+def _write_tables(out: Path, tables: list[tuple[str, Table]]) -> tuple[Path, Path]:
+    """``tables.md`` and ``tables.tex``."""
     md = out / "tables.md"
     md.write_text("\n\n".join(f"**{caption}**\n\n{_markdown(t)}" for caption, t in tables) + "\n")
     tex = out / "tables.tex"
@@ -530,6 +563,12 @@ def write_report(output_dir: str | Path, examples: bool = True) -> ReportFiles:
         + "\n\n".join(_latex(t, c) for c, t in tables)
         + "\n"
     )
+    return md, tex
+
+
+def _write_figures(summary: Summary, out: Path) -> list[Path]:
+    from vlocbench.bench.towns import town_named
+
     figures: list[Path] = []
     for town in summary.towns:
         name = summary.town_names[town]
@@ -541,38 +580,44 @@ def write_report(output_dir: str | Path, examples: bool = True) -> ReportFiles:
         if summary.spec.recall and summary.spec.failure:
             figures.append(failure_vs_recall_figure(summary, out / "failure_vs_recall.png"))
         figures.append(computation_time_figure(summary, out / "computation_time.png"))
-    parts = [
-        f"<h1>vlocbench: {html.escape(summary.spec.name)}</h1>",
-        f"<p>{len(rows)} episodes ({len(summary.errors)} with errors); experiment hash "
-        f"<code>{summary.spec.spec_hash}</code>; towns: {', '.join(summary.town_names[t] for t in summary.towns)}; "
-        f"methods: {', '.join(m.name for m in summary.spec.methods) or 'none'}; "
-        f"{len(summary.setups)} setup(s); {summary.spec.repetitions} repetition(s).</p>",
-    ]
-    for caption, table in tables:
-        parts += [f"<h3>{html.escape(caption)}</h3>", _html_table(table)]
-    parts.append("<h2>Figures</h2>")
-    parts += [
-        f"<figure>{_img(p.read_bytes(), 'image/png', p.stem)}<figcaption>{p.stem}</figcaption></figure>"
-        for p in figures
-    ]
-    if examples:
-        parts.append("<h2>Query images and the gallery view from the same pose</h2>")
-        for town in summary.towns:
-            logger.info(f"report: rendering example images of {summary.town_names[town]}")
-            for label, query, gallery in example_images(summary, town):
-                parts.append(
-                    f"<div><h4>{html.escape(summary.town_names[town])}: {html.escape(label)}</h4>"
-                    f"<figure>{_img(query, 'image/jpeg', 'query')}<figcaption>query</figcaption></figure>"
-                    f"<figure>{_img(gallery, 'image/jpeg', 'gallery')}<figcaption>gallery</figcaption></figure></div>"
-                )
-    if summary.errors:
-        parts.append("<h2 class='err'>Episodes that ended in an error</h2>")
-        parts += [f"<p>{html.escape(f'{r.town} {r.method} {r.kind} {r.setup} rep {r.repetition}')}</p><pre>{html.escape(r.error or '')}</pre>"
-                  for r in summary.errors]  # fmt: skip
+    return figures
+
+
+def _write_page(summary: Summary, episodes: int, tables: list[tuple[str, Table]],
+                figures: list[Path], examples: bool, out: Path) -> Path:  # fmt: skip
+    spec = summary.spec
     page = out / "index.html"
-    page.write_text(f"<!doctype html><html><head><meta charset='utf-8'><title>vlocbench: "
-                    f"{html.escape(summary.spec.name)}</title><style>{_CSS}</style></head><body>"
-                    + "\n".join(parts) + "</body></html>")  # fmt: skip
+    page.write_text(
+        _page_template().substitute(
+            title=html.escape(spec.name),
+            episodes=episodes,
+            errors=len(summary.errors),
+            spec_hash=spec.spec_hash,
+            towns=html.escape(", ".join(summary.town_names[t] for t in summary.towns)),
+            methods=html.escape(", ".join(m.name for m in spec.methods) or "none"),
+            setups=len(summary.setups),
+            repetitions=spec.repetitions,
+            tables="\n".join(
+                f"<h3>{html.escape(caption)}</h3>{_html_table(table)}" for caption, table in tables
+            ),
+            figures="\n".join(_figure_html(p.read_bytes(), "image/png", p.stem) for p in figures),
+            examples=_examples_html(summary) if examples else "",
+            error_details=_errors_html(summary.errors),
+        )
+    )
+    return page
+
+
+def write_report(output_dir: str | Path, examples: bool = True) -> ReportFiles:
+    """Write the tables, figures and the HTML page of the latest run in ``output_dir``."""
+    stored, rows = read_latest_run(output_dir)
+    summary = summarize(plan_from_stored(stored), rows)
+    out = Path(output_dir) / REPORT_DIR
+    out.mkdir(parents=True, exist_ok=True)
+    tables = _tables(summary)
+    md, tex = _write_tables(out, tables)
+    figures = _write_figures(summary, out)
+    page = _write_page(summary, len(rows), tables, figures, examples, out)
     return ReportFiles(page, md, tex, tuple(figures), summary)
 
 

@@ -94,6 +94,36 @@ def _baseline_drive(traffic: dict[str, Any], episode: dict[str, Any]) -> str:
     return json.dumps([traffic, settings], sort_keys=True)
 
 
+def _cell(key: tuple[str, str, str], group: list[EpisodeRow], errors: int) -> Cell:
+    """The figures of one (town, method, setup) from its episodes' stored metrics."""
+    fail = [r.metrics for r in group if r.kind in ("failure", "baseline") and r.metrics]
+    rec = [r.metrics for r in group if r.kind == "recall" and r.metrics]
+    sites = [s for m in fail for s in m["failure_sites_s_m"]]
+    town, method, setup = key
+    return Cell(
+        town=town,
+        method=method,
+        setup=setup,
+        failure=failure_rate([m["failures_per_km"] for m in fail]) if fail else None,
+        failure_by_cause=failure_rate_by_cause(
+            [m["failure_causes"] for m in fail], [m["route_covered_m"] for m in fail]
+        ),
+        timeouts=sum(not m["completed"] for m in fail),
+        recall=tuple(rec[0]["recall"]) if rec else None,
+        recall_planar=tuple(rec[0]["recall_planar"]) if rec else None,
+        confident_wrong=rec[0]["confident_wrong"] if rec else float("nan"),
+        recall_ekf=tuple(rec[0]["recall_ekf"]) if rec else None,
+        lock_losses_per_km=rec[0]["lock_losses_per_km"] if rec else float("nan"),
+        ct_s=_mean([r.metrics["ct_mean_s"] for r in group if r.metrics]),
+        fragmentation=fragmentation(sites) if fail else None,
+        tracking_error_m=_mean([m["tracking_error_mean_m"] for m in fail]),
+        drift=pooled_drift([seg for m in fail for seg in m["drift_segments"]]),
+        sites_xy=tuple(tuple(xy) for m in fail for xy in m["failure_sites_xy"]),
+        errors=errors,
+        keys=frozenset(r.key for r in group),
+    )
+
+
 def summarize(plan: ExperimentPlan, rows: Sequence[EpisodeRow]) -> Summary:
     """Aggregate ``rows`` (one run's episodes) by town, method and setup."""
     spec, the_setups = plan.spec, plan.setups
@@ -115,34 +145,7 @@ def summarize(plan: ExperimentPlan, rows: Sequence[EpisodeRow]) -> Summary:
     for r in rows:
         if r.status != "ok":
             errors_by[(r.config["town"], r.method, r.setup)] += 1
-    cells = {}
-    for key, group in by.items():
-        fail = [r.metrics for r in group if r.kind in ("failure", "baseline")]
-        rec = [r.metrics for r in group if r.kind == "recall"]
-        sites = [s for m in fail for s in m["failure_sites_s_m"]]
-        town, method, setup = key
-        cells[key] = Cell(
-            town=town,
-            method=method,
-            setup=setup,
-            failure=failure_rate([m["failures_per_km"] for m in fail]) if fail else None,
-            failure_by_cause=failure_rate_by_cause(
-                [m["failure_causes"] for m in fail], [m["route_covered_m"] for m in fail]
-            ),
-            timeouts=sum(not m["completed"] for m in fail),
-            recall=tuple(rec[0]["recall"]) if rec else None,
-            recall_planar=tuple(rec[0]["recall_planar"]) if rec else None,
-            confident_wrong=rec[0]["confident_wrong"] if rec else float("nan"),
-            recall_ekf=tuple(rec[0]["recall_ekf"]) if rec else None,
-            lock_losses_per_km=rec[0]["lock_losses_per_km"] if rec else float("nan"),
-            ct_s=_mean([r.metrics["ct_mean_s"] for r in group]),
-            fragmentation=fragmentation(sites) if fail else None,
-            tracking_error_m=_mean([m["tracking_error_mean_m"] for m in fail]),
-            drift=pooled_drift([seg for m in fail for seg in m["drift_segments"]]),
-            sites_xy=tuple(tuple(xy) for m in fail for xy in m["failure_sites_xy"]),
-            errors=errors_by.get(key, 0),
-            keys=frozenset(r.key for r in group),
-        )
+    cells = {key: _cell(key, group, errors_by.get(key, 0)) for key, group in by.items()}
     methods = tuple(m.name for m in spec.methods) + ((BASELINE,) if spec.baseline else ())
     town_names = {t: t for t in spec.towns} | {r.config["town"]: r.town for r in rows}
     return Summary(

@@ -109,6 +109,16 @@ class _Correspondences:
     points3D: NDArray[np.float64]  # (M, 3) world
 
 
+@dataclass(frozen=True)
+class _Pose:
+    """The best PnP answer so far: its inliers, pycolmap's answer, the cluster's images."""
+
+    inliers: int
+    answer: dict | None
+    cluster: list[int]
+    corr: _Correspondences | None
+
+
 @dataclass
 class _MapImage:
     name: str
@@ -223,17 +233,42 @@ class MapLocalizer:
         t = time.perf_counter()
         retrieved = self._retrieve(image, feats, prior_world_from_cam)
         seconds["retrieval"] = time.perf_counter() - t
-        names = tuple(self.images[i].name for i in retrieved)
         if len(feats) < c.min_points:
             reason = f"only {len(feats)} features in the image"
             return self._failed(retrieved, seconds, reason), None
-        best: tuple[int, dict | None, list[int], _Correspondences | None] = (0, None, [], None)
-        cam = colmap_camera(camera, 1)
+        best = self._best_pose(feats, colmap_camera(camera, 1), retrieved, seconds)
+        n_corr = 0 if best.corr is None else len(best.corr.points2D)
+        if best.answer is None or best.inliers < c.min_inliers:
+            reason = (
+                f"PnP found {best.inliers} inliers (< {c.min_inliers})"
+                if best.answer is not None
+                else f"PnP found no pose from {n_corr} correspondences"
+            )
+            return self._failed(retrieved, seconds, reason, n_corr), best.corr
+        covariance = best.answer.get("covariance")
+        return QueryResult(
+            success=True,
+            world_from_cam=invert_pose(pose_of(best.answer["cam_from_world"])),
+            num_inliers=best.inliers,
+            num_correspondences=n_corr,
+            retrieved=tuple(self.images[i].name for i in retrieved),
+            cluster=tuple(self.images[i].name for i in best.cluster),
+            cam_from_world_covariance=None if covariance is None else np.asarray(covariance),
+            seconds=seconds,
+        ), best.corr  # fmt: skip
+
+    def _best_pose(self, feats: Features, cam: pycolmap.Camera, retrieved: NDArray[np.int64],
+                   seconds: dict[str, float]) -> _Pose:  # fmt: skip
+        """Match the retrieved images cluster by cluster and solve PnP on each cluster's
+        correspondences; the pose with the most inliers wins. With ``confident_inliers``, PnP runs
+        as each image's matches accumulate and the search stops at a pose that confident."""
+        c = self.config
         options = pycolmap.AbsolutePoseEstimationOptions()
         options.ransac.max_error = c.ransac_max_error_px
         options.ransac.random_seed = c.ransac_seed
         seconds["matching"] = seconds["pnp"] = 0.0
         progressive = c.confident_inliers > 0
+        best = _Pose(0, None, [], None)
         for cluster in self._clusters(retrieved):
             q_idx: list[NDArray[np.int64]] = []
             xyz: list[NDArray[np.float64]] = []
@@ -243,10 +278,8 @@ class MapLocalizer:
                 seconds["matching"] += time.perf_counter() - t
                 q_idx.append(m[:, 0])
                 xyz.extend(self.points3D[p] for p in self.images[i].point_ids[m[:, 1]])
-                if not progressive and n < len(cluster) - 1:
-                    continue
                 q = np.concatenate(q_idx)
-                if len(q) < c.min_points:
+                if (not progressive and n < len(cluster) - 1) or len(q) < c.min_points:
                     continue
                 t = time.perf_counter()
                 corr = _Correspondences(
@@ -256,32 +289,11 @@ class MapLocalizer:
                     corr.points2D, corr.points3D, cam, options, return_covariance=True
                 )
                 seconds["pnp"] += time.perf_counter() - t
-                if answer is not None and answer["num_inliers"] > best[0]:
-                    best = (int(answer["num_inliers"]), answer, cluster[: n + 1], corr)
-                if progressive and best[0] >= c.confident_inliers:
-                    break
-            if progressive and best[0] >= c.confident_inliers:
-                break
-        inliers, answer, cluster, corr = best
-        n_corr = 0 if corr is None else len(corr.points2D)
-        if answer is None or inliers < c.min_inliers:
-            reason = (
-                f"PnP found {inliers} inliers (< {c.min_inliers})"
-                if answer is not None
-                else f"PnP found no pose from {n_corr} correspondences"
-            )
-            return self._failed(retrieved, seconds, reason, n_corr), corr
-        return QueryResult(
-            success=True,
-            world_from_cam=invert_pose(pose_of(answer["cam_from_world"])),
-            num_inliers=inliers,
-            num_correspondences=n_corr,
-            retrieved=names,
-            cluster=tuple(self.images[i].name for i in cluster),
-            cam_from_world_covariance=None if answer.get("covariance") is None
-            else np.asarray(answer["covariance"]),
-            seconds=seconds,
-        ), corr  # fmt: skip
+                if answer is not None and answer["num_inliers"] > best.inliers:
+                    best = _Pose(int(answer["num_inliers"]), answer, cluster[: n + 1], corr)
+                if progressive and best.inliers >= c.confident_inliers:
+                    return best
+        return best
 
     def localize_rig(
         self,
@@ -294,7 +306,6 @@ class MapLocalizer:
         ``rig_from_cams``, each (4, 4)): each camera as :meth:`localize` does, then one
         generalized PnP with LO-RANSAC over the correspondences of every camera's winning cluster,
         so that cameras that see little still add their constraints."""
-        c = self.config
         if not (len(images) == len(cameras) == len(rig_from_cams) >= 1):
             raise LocalizationError(
                 f"a rig query needs one image, camera and mounting per camera; got "
@@ -314,24 +325,11 @@ class MapLocalizer:
         pnp, best_inliers, best_k = max(found, default=(False, 0, -1))
         best_inliers = best_inliers if pnp else 0
         if len(pooled) >= 2:
-            options = pycolmap.RANSACOptions()
-            options.max_error = c.ransac_max_error_px
-            options.random_seed = c.ransac_seed
             t = time.perf_counter()
-            answer = pycolmap.estimate_and_refine_generalized_absolute_pose(
-                np.concatenate([corr.points2D for _, corr in pooled]),
-                np.concatenate([corr.points3D for _, corr in pooled]),
-                [k for k, corr in pooled for _ in range(len(corr.points2D))],
-                [rigid_of(invert_pose(m)) for m in rig_from_cams],
-                [colmap_camera(cam, k + 1) for k, cam in enumerate(cameras)],
-                options,
-            )  # fmt: skip
+            generalized = self._generalized_pose(pooled, cameras, rig_from_cams)
             seconds["pnp"] = seconds.get("pnp", 0.0) + time.perf_counter() - t
-            # its num_inliers can count a 3D point that two cameras see once; the mask counts
-            # correspondences, as the single-camera PnP does
-            inliers = 0 if answer is None else int(np.sum(answer["inlier_mask"]))
-            if answer is not None and inliers > best_inliers and inliers >= c.min_inliers:
-                world_from_rig = invert_pose(pose_of(answer["rig_from_world"]))
+            if generalized is not None and generalized[1] > best_inliers:
+                world_from_rig, inliers = generalized
                 return RigResult(success=True, world_from_rig=world_from_rig, num_inliers=inliers,
                                  camera=-1, cameras=tuple(results), seconds=seconds)  # fmt: skip
         if best_k >= 0:
@@ -344,6 +342,36 @@ class MapLocalizer:
         reason = "; ".join(f"camera {k}: {r.reason}" for k, r in enumerate(results))
         return RigResult(success=False, world_from_rig=None, num_inliers=0, camera=-1,
                          cameras=tuple(results), seconds=seconds, reason=reason)  # fmt: skip
+
+    def _generalized_pose(
+        self,
+        pooled: list[tuple[int, _Correspondences]],
+        cameras: Sequence[CameraModel],
+        rig_from_cams: Sequence[NDArray[np.float64]],
+    ) -> tuple[NDArray[np.float64], int] | None:
+        """(world_from_rig, inliers) of one generalized PnP over the cameras' correspondences
+        (camera k's as ``pooled`` (k, correspondences)); None without an answer that has at least
+        ``min_inliers``."""
+        c = self.config
+        options = pycolmap.RANSACOptions()
+        options.max_error = c.ransac_max_error_px
+        options.random_seed = c.ransac_seed
+        answer = pycolmap.estimate_and_refine_generalized_absolute_pose(
+            np.concatenate([corr.points2D for _, corr in pooled]),
+            np.concatenate([corr.points3D for _, corr in pooled]),
+            [k for k, corr in pooled for _ in range(len(corr.points2D))],
+            [rigid_of(invert_pose(m)) for m in rig_from_cams],
+            [colmap_camera(cam, k + 1) for k, cam in enumerate(cameras)],
+            options,
+        )
+        if answer is None:
+            return None
+        # its num_inliers can count a 3D point that two cameras see once; the mask counts
+        # correspondences, as the single-camera PnP does
+        inliers = int(np.sum(answer["inlier_mask"]))
+        if inliers < c.min_inliers:
+            return None
+        return invert_pose(pose_of(answer["rig_from_world"])), inliers
 
     def _failed(self, retrieved: NDArray[np.int64], seconds: dict[str, float], reason: str,
                 n_corr: int = 0) -> QueryResult:  # fmt: skip

@@ -189,40 +189,36 @@ def platform_mesh(
     tile_m: float,
 ) -> None:
     """A raised slab: its top (subdivided, rounded corners as fans) and its curb faces."""
+    _platform_top(top, rect, radius, height, cell_m, tile_m)
+    _curb_faces(side, rect, radius, height, cell_m)
+
+
+def _platform_top(top: MeshBuilder, rect: tuple[float, float, float, float], r: float,
+                  height: float, cell_m: float, tile_m: float) -> None:  # fmt: skip
+    """A cross-shaped body (centre column plus the two side columns) and a fan per corner."""
     x0, y0, x1, y1 = rect
     z = np.array([0.0, 0.0, height])
     ex, ey = np.array([1.0, 0, 0]), np.array([0, 1.0, 0])
     uvk = (1 / tile_m, 1 / tile_m)
-    r = radius
-    # cross-shaped body of the top: centre column plus the two side columns
-    top.quad(
-        np.array([x0 + r, y0, 0]) + z,
-        ex,
-        ey,
-        x1 - x0 - 2 * r,
-        y1 - y0,
-        ((x0 + r) / tile_m, y0 / tile_m),
-        uvk,
-        cell_m,
-    )
-    if r > 0:
-        for xa in (x0, x1 - r):
-            top.quad(
-                np.array([xa, y0 + r, 0]) + z,
-                ex,
-                ey,
-                r,
-                y1 - y0 - 2 * r,
-                (xa / tile_m, (y0 + r) / tile_m),
-                uvk,
-                cell_m,
-            )
-        for (cx, cy), arc in corner_arcs(rect, r, 1.0):
-            n = len(arc) - 1
-            ring = np.concatenate([arc, np.full((n + 1, 1), height)], axis=1)
-            verts = np.concatenate([[[cx, cy, height]], ring])
-            faces = np.stack([np.zeros(n, np.int64), np.arange(1, n + 1), np.arange(2, n + 2)], 1)
-            top.add(verts, verts[:, :2] / tile_m, faces)
+    top.quad(np.array([x0 + r, y0, 0]) + z, ex, ey, x1 - x0 - 2 * r, y1 - y0,
+             ((x0 + r) / tile_m, y0 / tile_m), uvk, cell_m)  # fmt: skip
+    if r <= 0:
+        return
+    for xa in (x0, x1 - r):
+        top.quad(np.array([xa, y0 + r, 0]) + z, ex, ey, r, y1 - y0 - 2 * r,
+                 (xa / tile_m, (y0 + r) / tile_m), uvk, cell_m)  # fmt: skip
+    for (cx, cy), arc in corner_arcs(rect, r, 1.0):
+        n = len(arc) - 1
+        ring = np.concatenate([arc, np.full((n + 1, 1), height)], axis=1)
+        verts = np.concatenate([[[cx, cy, height]], ring])
+        faces = np.stack([np.zeros(n, np.int64), np.arange(1, n + 1), np.arange(2, n + 2)], 1)
+        top.add(verts, verts[:, :2] / tile_m, faces)
+
+
+def _curb_faces(side: MeshBuilder, rect: tuple[float, float, float, float], r: float,
+                height: float, cell_m: float) -> None:  # fmt: skip
+    """The vertical faces along the rounded outline, subdivided: fog and lighting are computed
+    per vertex."""
     outline = rounded_rect_outline(rect, r)
     closed = np.concatenate([outline, outline[:1]])
     for a, b in itertools.pairwise(closed):
@@ -231,12 +227,5 @@ def platform_mesh(
         if length < 1e-6:
             continue
         u = np.array([d[0], d[1], 0.0]) / length
-        side.quad(
-            np.array([a[0], a[1], 0.0]),
-            u,
-            np.array([0, 0, 1.0]),
-            length,
-            height,
-            uv_per_m=(1.0, 1.0),
-            cell_m=cell_m,  # fog and lighting are computed per vertex
-        )
+        side.quad(np.array([a[0], a[1], 0.0]), u, np.array([0, 0, 1.0]), length, height,
+                  uv_per_m=(1.0, 1.0), cell_m=cell_m)  # fmt: skip

@@ -37,6 +37,17 @@ CAR_COLORS = (
 )  # fmt: skip
 FACADE_TINTS = ((1.0, 1.0, 1.0), (0.9, 0.93, 1.0), (1.0, 0.92, 0.85))
 SEASON_MATERIALS = ("ground", "paving", "road", "roof", "grass")
+GROUND_KINDS = (
+    "grass",
+    "autumn_grass",
+    "sand",
+    "water",
+    "roof",
+    "bark",
+    "leaves",
+    "concrete",
+    "metal",
+)
 
 
 @dataclass(frozen=True)
@@ -117,7 +128,20 @@ class _SceneBuilder:
         self.materials.add(name)
 
     def make_assets(self) -> None:
-        spec, _town, rng = self.town.spec, self.town, self.rng
+        """Textures and materials, drawn from the scene's generator in a fixed order (buildings,
+        then ground and props), so that a town always looks the same."""
+        self._building_assets()
+        self._ground_assets()
+        self._season_materials()
+        self._object_materials()
+        sky = self.spec.add_texture(name="sky", type=mujoco.mjtTexture.mjTEXTURE_SKYBOX)
+        sky.width, sky.height, sky.nchannel = SKY_SIZE, 6 * SKY_SIZE, 3
+        sky.data = tex.sky((0.35, 0.55, 0.85), (0.75, 0.82, 0.9), SKY_SIZE).tobytes()
+
+    def _building_assets(self) -> None:
+        """Facade styles (each in FACADE_TINTS), tower glass, and every shopfront in one atlas
+        texture: one material, one mesh, however many shops."""
+        spec, rng = self.town.spec, self.rng
         fh = spec.buildings.floor_height_m
         for s in range(spec.buildings.facade_styles):
             style = s if spec.style == "town" else (s * 2 + 1) % 4  # cities: stone/concrete/plaster
@@ -131,7 +155,6 @@ class _SceneBuilder:
             self.tiles[f"tower{s}"] = tile
             self.texture(f"tower{s}", tile.image)
             self.material(f"tower{s}", f"tower{s}", specular=0.5, shininess=0.6)
-        # every shopfront in one atlas texture: one material, one mesh, however many shops
         shops = [
             tex.shopfront(s + 6 * spec.seed, GROUND_FLOOR_M, rng)
             for s in range(spec.buildings.shop_styles)
@@ -140,6 +163,10 @@ class _SceneBuilder:
         self.shop_rows = -(-len(shops) // self.shop_columns)
         self.texture("shops", tex.atlas([t.image for t in shops], self.shop_columns))
         self.material("shops", "shops", specular=0.2)
+
+    def _ground_assets(self) -> None:
+        """Road, asphalt, crosswalk, paving (and their winter forms), ground kinds, signs."""
+        spec, rng = self.town.spec, self.rng
         road = tex.road_tile(spec.road.lane_width_m, 12.0, rng, spec.road.lanes_per_direction)
         self.texture("road", road)
         self.texture("road_winter", tex.snowy_road(road, rng))
@@ -149,20 +176,13 @@ class _SceneBuilder:
         self.texture("crosswalk", tex.crosswalk_tile(rng))
         self.texture("paving", tex.paving(rng))
         self.texture("paving_winter", tex.paving(rng, snow=0.8))
-        for kind in (
-            "grass",
-            "autumn_grass",
-            "sand",
-            "water",
-            "roof",
-            "bark",
-            "leaves",
-            "concrete",
-            "metal",
-        ):
+        for kind in GROUND_KINDS:
             self.texture(kind, tex.ground(kind, rng))
         self.texture("snow", tex.ground("concrete", rng, snow=1.2))
         self.texture("signs", tex.sign_atlas(rng))
+
+    def _season_materials(self) -> None:
+        """Each surface family in summer, autumn and winter dress."""
         for family in SEASON_MATERIALS:
             base = {
                 "ground": "grass",
@@ -179,6 +199,8 @@ class _SceneBuilder:
         self.material("intersection", "asphalt", specular=0.05)
         self.material("intersection_winter", "asphalt_winter", specular=0.2)
         self.material("intersection_autumn", "asphalt", specular=0.05)
+
+    def _object_materials(self) -> None:
         self.material("crosswalk", "crosswalk", specular=0.05)
         self.material("curb", "concrete")
         self.material("sand", "sand")
@@ -191,9 +213,6 @@ class _SceneBuilder:
         self.material("glass", None, (0.08, 0.1, 0.12, 1), specular=0.8, shininess=0.9)
         for k, c in enumerate(CAR_COLORS):
             self.material(f"car{k}", None, c, specular=0.6, shininess=0.7)
-        sky = self.spec.add_texture(name="sky", type=mujoco.mjtTexture.mjTEXTURE_SKYBOX)
-        sky.width, sky.height, sky.nchannel = SKY_SIZE, 6 * SKY_SIZE, 3
-        sky.data = tex.sky((0.35, 0.55, 0.85), (0.75, 0.82, 0.9), SKY_SIZE).tobytes()
 
     # -- geometry -------------------------------------------------------------------------------
     def collide_box(
@@ -516,12 +535,23 @@ class _SceneBuilder:
         self.platforms()
         self.buildings()
         self.props()
+        season_geoms = self._mesh_geoms()
+        spec.worldbody.add_light(
+            name="sun", type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL, dir=[0.3, 0.4, -0.85],
+            diffuse=[0.8, 0.8, 0.8], ambient=[0.3, 0.3, 0.3], specular=[0.2, 0.2, 0.2], castshadow=False,
+        )  # fmt: skip
+        self.bodies()
+        return self._scene(spec.compile(), season_geoms)
+
+    def _mesh_geoms(self) -> dict[str, list[str]]:
+        """One visual mesh geom per material; returns the geoms whose material changes with the
+        season, by material."""
         season_geoms: dict[str, list[str]] = defaultdict(list)
         for name, mb in self.meshes.items():
             if not mb:
                 continue
             v, uv, f = mb.arrays()
-            mesh = spec.add_mesh(name=f"mesh_{name}")
+            mesh = self.spec.add_mesh(name=f"mesh_{name}")
             mesh.inertia = mujoco.mjtMeshInertia.mjMESH_INERTIA_SHELL
             mesh.uservert = v.ravel().tolist()
             mesh.usertexcoord = uv.ravel().tolist()
@@ -529,19 +559,17 @@ class _SceneBuilder:
             group = {"leaves_full": GROUP_FOLIAGE_FULL, "leaves_sparse": GROUP_FOLIAGE_SPARSE}.get(
                 name, GROUP_STATIC
             )
-            spec.worldbody.add_geom(
+            self.spec.worldbody.add_geom(
                 name=f"vis_{name}", type=mujoco.mjtGeom.mjGEOM_MESH, meshname=f"mesh_{name}",
                 material=name, contype=0, conaffinity=0, group=group,
             )  # fmt: skip
             if name in (*SEASON_MATERIALS, "intersection"):
                 season_geoms[name].append(f"vis_{name}")
-        spec.worldbody.add_light(
-            name="sun", type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL, dir=[0.3, 0.4, -0.85],
-            diffuse=[0.8, 0.8, 0.8], ambient=[0.3, 0.3, 0.3], specular=[0.2, 0.2, 0.2], castshadow=False,
-        )  # fmt: skip
-        self.bodies()
-        model = spec.compile()
-        data = mujoco.MjData(model)
+        return season_geoms
+
+    def _scene(self, model: mujoco.MjModel, season_geoms: dict[str, list[str]]) -> TownScene:
+        """The compiled model with its lookup tables; traffic parked out of sight, the ego car at
+        the route's start."""
         geom_info = {model.geom(f"col{k}").id: info for k, info in enumerate(self.collision)}
         for k in range(self.options.max_cars):
             for g in (f"car_body{k}", f"car_cabin{k}"):
@@ -557,7 +585,7 @@ class _SceneBuilder:
             town=self.town,
             options=self.options,
             model=model,
-            data=data,
+            data=mujoco.MjData(model),
             geom_info=geom_info,
             season_geoms={k: [model.geom(n).id for n in v] for k, v in season_geoms.items()},
             material_ids={name: model.material(name).id for name in self.materials},

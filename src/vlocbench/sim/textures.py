@@ -57,6 +57,20 @@ class FacadeTile:
 FACADE_VARIANTS = 12  # window cells per facade style; every wall draws its own sequence of them
 
 
+@dataclass(frozen=True)
+class _FacadeStyle:
+    """What the cells of one facade style share (sizes in texels, colours RGB 0-255)."""
+
+    family: int  # 0 brick, 1 plaster, 2 stone, 3 concrete panels, 4 glass curtain wall
+    size: tuple[int, int]  # cell (height, width)
+    base: NDArray
+    window: tuple[int, int, int, int]  # x0, y0, x1, y1
+    frame: NDArray
+    glass: NDArray
+    balconies: bool
+    shutter_color: NDArray | None
+
+
 def facade(
     style: int, floor_height_m: float, rng: np.random.Generator, variants: int = FACADE_VARIANTS
 ) -> FacadeTile:
@@ -80,50 +94,58 @@ def facade(
     )
     win_w = float(rng.uniform(0.35, 0.6)) * bay_m
     win_h = float(rng.uniform(0.45, 0.62)) * floor_height_m
+    if family == 4:  # glass: a full-height panel with mullions
+        window = (3, 6, w - 3, h - 10)
+    else:
+        y0 = round((floor_height_m - win_h) * 0.45 * PX_PER_M)
+        window = (
+            round((w - win_w * PX_PER_M) / 2), y0,
+            round((w + win_w * PX_PER_M) / 2), round(y0 + win_h * PX_PER_M),
+        )  # fmt: skip
     frame = rng.uniform(20, 240, 3)
     glass = rng.uniform([40, 55, 70], [90, 110, 130])
     balconies = family in (1, 2) and rng.random() < 0.5
     shutter_color = rng.uniform(40, 200, 3) if family in (0, 1) and rng.random() < 0.4 else None
-    cells = []
-    for _ in range(variants):
-        img = np.ones((h, w, 3), np.float32) * base
-        img += noise((h, w), rng, 24, 14)[..., None]
-        _wall_pattern(img, family, base, rng)
-        if family == 4:  # glass: a full-height panel with mullions
-            x0, x1, y0, y1 = 3, w - 3, 6, h - 10
-        else:
-            x0, x1 = round((w - win_w * PX_PER_M) / 2), round((w + win_w * PX_PER_M) / 2)
-            y0 = round((floor_height_m - win_h) * 0.45 * PX_PER_M)
-            y1 = round(y0 + win_h * PX_PER_M)
-        _window(img, (x0, y0, x1, y1), glass, frame, rng)
-        if family != 4:
-            cv2.rectangle(img, (x0 - 4, y1), (x1 + 4, y1 + 6), _rgb(base * 0.6 + 60), -1)
-            if rng.random() < 0.2:  # flower box on the sill
-                cv2.rectangle(img, (x0, y1 - 10), (x1, y1), _rgb(rng.uniform(60, 160, 3)), -1)
-                for xx in range(x0 + 4, x1 - 4, 9):
-                    leaf = rng.uniform([30, 90, 20], [90, 170, 70])
-                    cv2.circle(img, (xx, y1 - 12), int(rng.integers(3, 7)), _rgb(leaf), -1)
-            if rng.random() < 0.12:  # air conditioner under the window
-                ax = int(rng.integers(x0, max(x0 + 1, x1 - 40)))
-                cv2.rectangle(img, (ax, y1 + 10), (ax + 40, y1 + 34), (205, 205, 200), -1)
-                cv2.circle(img, (ax + 20, y1 + 22), 8, (120, 120, 120), 1)
-        if shutter_color is not None:
-            sw = (x1 - x0) // 3
-            for sx in (x0 - sw - 2, x1 + 2):
-                cv2.rectangle(img, (sx, y0), (sx + sw, y1), _rgb(shutter_color), -1)
-                for yy in range(y0, y1, 6):
-                    cv2.line(img, (sx, yy), (sx + sw, yy), _rgb(shutter_color * 0.7), 1)
-        if balconies and rng.random() < 0.5:
-            railing = _rgb(frame * 0.5)
-            cv2.rectangle(img, (x0 - 12, y1 - 28), (x1 + 12, y1 + 2), railing, 2)
-            for xx in range(x0 - 12, x1 + 12, 8):
-                cv2.line(img, (xx, y1 - 28), (xx, y1 + 2), railing, 1)
-        if family == 4:
-            img = cv2.GaussianBlur(img, (3, 3), 0)
-        else:
-            _weathering(img, rng, base)
-        cells.append(_finish(img, rng))
+    look = _FacadeStyle(family, (h, w), base, window, frame, glass, balconies, shutter_color)
+    cells = [_facade_cell(look, rng) for _ in range(variants)]
     return FacadeTile(atlas(cells, variants), bay_m, floor_height_m, variants)
+
+
+def _facade_cell(look: _FacadeStyle, rng: np.random.Generator) -> Image:
+    """One bay of one floor in ``look``, with its own window dressing and weathering."""
+    (h, w), base, family = look.size, look.base, look.family
+    x0, y0, x1, y1 = look.window
+    img = np.ones((h, w, 3), np.float32) * base
+    img += noise((h, w), rng, 24, 14)[..., None]
+    _wall_pattern(img, family, base, rng)
+    _window(img, look.window, look.glass, look.frame, rng)
+    if family != 4:
+        cv2.rectangle(img, (x0 - 4, y1), (x1 + 4, y1 + 6), _rgb(base * 0.6 + 60), -1)
+        if rng.random() < 0.2:  # flower box on the sill
+            cv2.rectangle(img, (x0, y1 - 10), (x1, y1), _rgb(rng.uniform(60, 160, 3)), -1)
+            for xx in range(x0 + 4, x1 - 4, 9):
+                leaf = rng.uniform([30, 90, 20], [90, 170, 70])
+                cv2.circle(img, (xx, y1 - 12), int(rng.integers(3, 7)), _rgb(leaf), -1)
+        if rng.random() < 0.12:  # air conditioner under the window
+            ax = int(rng.integers(x0, max(x0 + 1, x1 - 40)))
+            cv2.rectangle(img, (ax, y1 + 10), (ax + 40, y1 + 34), (205, 205, 200), -1)
+            cv2.circle(img, (ax + 20, y1 + 22), 8, (120, 120, 120), 1)
+    if look.shutter_color is not None:
+        sw = (x1 - x0) // 3
+        for sx in (x0 - sw - 2, x1 + 2):
+            cv2.rectangle(img, (sx, y0), (sx + sw, y1), _rgb(look.shutter_color), -1)
+            for yy in range(y0, y1, 6):
+                cv2.line(img, (sx, yy), (sx + sw, yy), _rgb(look.shutter_color * 0.7), 1)
+    if look.balconies and rng.random() < 0.5:
+        railing = _rgb(look.frame * 0.5)
+        cv2.rectangle(img, (x0 - 12, y1 - 28), (x1 + 12, y1 + 2), railing, 2)
+        for xx in range(x0 - 12, x1 + 12, 8):
+            cv2.line(img, (xx, y1 - 28), (xx, y1 + 2), railing, 1)
+    if family == 4:
+        img = cv2.GaussianBlur(img, (3, 3), 0)
+    else:
+        _weathering(img, rng, base)
+    return _finish(img, rng)
 
 
 def _wall_pattern(img: NDArray, family: int, base: NDArray, rng: np.random.Generator) -> None:

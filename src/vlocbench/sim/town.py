@@ -401,53 +401,17 @@ class _Builder:
     def build(self) -> Town:
         spec = self.spec
         xs, ys = self.layout.xs, self.layout.ys
-        hw, sw = self.hw, self.sw
-        r = spec.road.corner_radius_m
-        parks = set(spec.parks)
         blocks = [(i, j) for i in range(len(xs) - 1) for j in range(len(ys) - 1)]
-        tower_blocks = set()
-        if spec.buildings.tower_block_fraction > 0:
-            n = round(spec.buildings.tower_block_fraction * len(blocks))
-            candidates = [b for b in blocks if b not in parks]
-            picks = self.rng.permutation(len(candidates))[:n]
-            tower_blocks = {candidates[k] for k in picks}
-        for i, j in blocks:
-            curb = (xs[i] + hw, ys[j] + hw, xs[i + 1] - hw, ys[j + 1] - hw)
-            self.platforms.append(Platform(curb, r))
-            lot = (curb[0] + sw, curb[1] + sw, curb[2] - sw, curb[3] - sw)
-            if (i, j) in parks:
-                self.park(lot)
-            elif (i, j) in tower_blocks:
-                self.towers(lot)
-            else:
-                self.lot(lot, "SNWE")
-            cx0, cy0, cx1, cy1 = curb
-            for a, b, n in (
-                ((cx0, cy0), (cx1, cy0), (0, -1)),
-                ((cx1, cy0), (cx1, cy1), (1, 0)),
-                ((cx1, cy1), (cx0, cy1), (0, 1)),
-                ((cx0, cy1), (cx0, cy0), (-1, 0)),
-            ):
-                self.curb_props(np.array(a), np.array(b), np.array(n, float), r + 1.0)
-            self.corner_signs(curb)
+        tower_blocks = self._tower_blocks(blocks)
+        for block in blocks:
+            self.block(block, block in tower_blocks)
         self.border()
-        rects = [p.rect for p in self.platforms] + self.sand + self.water
-        corners = np.array(rects)
+        corners = np.array([p.rect for p in self.platforms] + self.sand + self.water)
         extent = (
             float(corners[:, 0].min()),
             float(corners[:, 1].min()),
             float(corners[:, 2].max()),
             float(corners[:, 3].max()),
-        )
-        route = build_route(
-            self.layout, spec.route.nodes, spec.route.start_offset_m, spec.route.end_offset_m
-        )
-        target = spec.route.target_length_m
-        require(
-            target is None or abs(route.length_m - target) <= ROUTE_LENGTH_TOLERANCE * target,
-            "route.target_length_m",
-            f"the route's nodes and offsets give {route.length_m:.0f} m, more than "
-            f"{ROUTE_LENGTH_TOLERANCE:.0%} off {target} m",
         )
         return Town(
             spec=spec,
@@ -462,9 +426,57 @@ class _Builder:
             signs=_arr(self.signs, 4),
             bollards=_arr(self.bollards, 2),
             parked_cars=_arr(self.parked, 4),
-            route=route,
+            route=self.route(),
             extent=extent,
         )
+
+    def _tower_blocks(self, blocks: list[tuple[int, int]]) -> set[tuple[int, int]]:
+        """The city blocks (not parks) that get towers: ``tower_block_fraction`` of all."""
+        fraction = self.spec.buildings.tower_block_fraction
+        if fraction <= 0:
+            return set()
+        candidates = [b for b in blocks if b not in set(self.spec.parks)]
+        picks = self.rng.permutation(len(candidates))[: round(fraction * len(blocks))]
+        return {candidates[k] for k in picks}
+
+    def block(self, block: tuple[int, int], towers: bool) -> None:
+        """One city block: its raised sidewalk platform, a park, towers or a row of buildings on
+        every side, and the props along its curbs."""
+        (i, j), xs, ys = block, self.layout.xs, self.layout.ys
+        hw, sw, r = self.hw, self.sw, self.spec.road.corner_radius_m
+        curb = (xs[i] + hw, ys[j] + hw, xs[i + 1] - hw, ys[j + 1] - hw)
+        self.platforms.append(Platform(curb, r))
+        lot = (curb[0] + sw, curb[1] + sw, curb[2] - sw, curb[3] - sw)
+        if block in set(self.spec.parks):
+            self.park(lot)
+        elif towers:
+            self.towers(lot)
+        else:
+            self.lot(lot, "SNWE")
+        cx0, cy0, cx1, cy1 = curb
+        for a, b, n in (
+            ((cx0, cy0), (cx1, cy0), (0, -1)),
+            ((cx1, cy0), (cx1, cy1), (1, 0)),
+            ((cx1, cy1), (cx0, cy1), (0, 1)),
+            ((cx0, cy1), (cx0, cy0), (-1, 0)),
+        ):
+            self.curb_props(np.array(a), np.array(b), np.array(n, float), r + 1.0)
+        self.corner_signs(curb)
+
+    def route(self) -> Route:
+        """The test route, checked against its target length."""
+        spec = self.spec
+        route = build_route(
+            self.layout, spec.route.nodes, spec.route.start_offset_m, spec.route.end_offset_m
+        )
+        target = spec.route.target_length_m
+        require(
+            target is None or abs(route.length_m - target) <= ROUTE_LENGTH_TOLERANCE * target,
+            "route.target_length_m",
+            f"the route's nodes and offsets give {route.length_m:.0f} m, more than "
+            f"{ROUTE_LENGTH_TOLERANCE:.0%} off {target} m",
+        )
+        return route
 
     def border(self) -> None:
         """Strips outside the ring road: a row of buildings facing it, or the beach."""
