@@ -61,9 +61,11 @@ from vlocbench.bench.runner import execute
 from vlocbench.bench.store import ResultStore
 from vlocbench.cli import _signals_interrupt
 
+scheduler = sys.argv[2] if len(sys.argv) > 2 else None
 with ResultStore(sys.argv[1], "fake") as store, _signals_interrupt():
     try:
-        execute(_fake_tasks(), store, workers=2, runner=run_fake, progress=False)
+        execute(_fake_tasks(), store, workers=2, scheduler=scheduler, runner=run_fake,
+                progress=False)
     except KeyboardInterrupt:
         sys.exit(130)
 """
@@ -144,6 +146,35 @@ def test_dask_cluster_on_loopback(tmp_path, control):
     assert e.slots == 2  # the cluster's threads, whatever --workers says
     assert (e.workers_lost, e.retried) == (1, 1)  # the summary says a worker died
     assert not (control / "die-illumination.k=6-sift-vlad-1").exists()  # it did die, once
+
+
+def test_an_interrupted_dask_run_leaves_the_cluster_idle(tmp_path, control):
+    """Dask cannot stop a task that is running, but nothing else of the run may stay queued."""
+    distributed = pytest.importorskip("distributed")
+    (control / "sleep-all").write_text("2")  # 8 episodes on 2 workers: about 8 s
+    cluster = distributed.LocalCluster(
+        n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
+        dashboard_address=None, local_directory=str(tmp_path / "dask"),
+    )  # fmt: skip
+    env = {**os.environ, "PYTHONPATH": os.getcwd(), CONTROL_ENV: str(control)}
+    with cluster, distributed.Client(cluster.scheduler_address) as client:
+        driver = subprocess.Popen(
+            [sys.executable, "-c", _DRIVER, str(tmp_path / "out"), cluster.scheduler_address],
+            env=env, stderr=subprocess.PIPE, text=True,
+        )  # fmt: skip
+        deadline = time.monotonic() + 60
+        while not client.processing() or not any(client.processing().values()):
+            assert time.monotonic() < deadline, "the run never started"
+            time.sleep(0.1)
+        driver.send_signal(signal.SIGTERM)
+        assert driver.wait(timeout=30) == 130, driver.stderr.read()
+        # the episodes in flight finish (2 s); none of the queued ones starts
+        deadline = time.monotonic() + 20
+        while client.run_on_scheduler(lambda dask_scheduler: len(dask_scheduler.tasks)):
+            assert time.monotonic() < deadline, client.processing()
+            time.sleep(0.2)
+    with ResultStore(tmp_path / "out", "fake") as store:
+        assert len(store.done_keys()) < len(_fake_tasks())
 
 
 def test_an_unreachable_scheduler_is_a_clear_error(tmp_path, monkeypatch):
