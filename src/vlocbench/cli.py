@@ -402,6 +402,50 @@ def _add_map_verbs(sub: Any, shared: dict[str, argparse.ArgumentParser]) -> None
     p.set_defaults(func=_localize)
 
 
+def _add_ros_verbs(sub: Any, shared: dict[str, argparse.ArgumentParser]) -> None:
+    p = sub.add_parser(
+        "ros", help="ROS 2 nodes (needs the ros extra: pip install 'vlocbench[ros]')"
+    )
+    verbs = p.add_subparsers(dest="ros_command", required=True, metavar="NODE")
+    q = verbs.add_parser(
+        "localize",
+        help="the paper's visual localization node on a map",
+        description="Parameters as the paper's node names them; set them after the options with "
+        "--ros-args -p NAME:=VALUE or --ros-args --params-file FILE.yaml (everything from "
+        "--ros-args on goes to rclpy).",
+    )
+    q.add_argument("--map", type=Path, required=True, help="map folder (vlocbench build-map)")
+    q.set_defaults(func=_ros_localize)
+
+
+def _ros_localize(args: argparse.Namespace) -> int:
+    from vlocbench.errors import MachineError
+    from vlocbench.ros.environment import local_only
+
+    local_only()
+    try:
+        import rclpy
+        from rclpy.parameter import Parameter
+
+        from vlocbench.ros.localization_node import LocalizationNode
+    except ImportError as exc:
+        raise MachineError(
+            f"ROS 2 is not installed ({exc}): pip install 'vlocbench[ros]'"
+        ) from None
+    rclpy.init(args=["vlocbench", *args.ros_args])
+    node = LocalizationNode(
+        parameter_overrides=[Parameter("map_dir", Parameter.Type.STRING, str(args.map))]
+    )
+    try:
+        rclpy.spin(node)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
 def _add_experiment_verbs(sub: Any, shared: dict[str, argparse.ArgumentParser]) -> None:
     p = sub.add_parser("run", parents=[shared["report"]],
                        help="run an experiment file: galleries, maps, episodes, then the report")  # fmt: skip
@@ -442,13 +486,23 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("-q", "--quiet", action="store_true", help="log warnings and errors only")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     shared = _parents()
-    for add in (_add_town_verbs, _add_drive_verb, _add_map_verbs, _add_experiment_verbs):
+    for add in (
+        _add_town_verbs,
+        _add_drive_verb,
+        _add_map_verbs,
+        _add_experiment_verbs,
+        _add_ros_verbs,
+    ):
         add(sub, shared)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)  # exits with EXIT_USAGE on a bad command line
+    argv = list(sys.argv[1:] if argv is None else argv)
+    # ROS's own arguments (``--ros-args ...``) go to rclpy untouched
+    cut = argv.index("--ros-args") if "--ros-args" in argv else len(argv)
+    args = build_parser().parse_args(argv[:cut])  # exits with EXIT_USAGE on a bad command line
+    args.ros_args = argv[cut:]
     _configure_logging(
         logging.DEBUG if args.verbose else logging.WARNING if args.quiet else logging.INFO
     )
