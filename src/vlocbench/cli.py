@@ -194,6 +194,20 @@ def _run(args: argparse.Namespace) -> int:
     return 1 if summary.errors else 0
 
 
+def _export(args: argparse.Namespace) -> int:
+    from vlocbench.errors import MachineError
+
+    try:
+        from vlocbench.ros.bags import export_bags
+    except ImportError as exc:
+        raise MachineError(
+            f"rosbags is not installed ({exc}): pip install 'vlocbench[ros]'"
+        ) from None
+    written = export_bags(args.output)
+    print(f"wrote {len(written)} bags to {args.output / 'bags'}")
+    return 0
+
+
 @contextlib.contextmanager
 def _signals_interrupt() -> Iterator[None]:
     """SIGTERM, and SIGINT even where a shell started the run in the background with it ignored,
@@ -456,6 +470,12 @@ def _add_experiment_verbs(sub: Any, shared: dict[str, argparse.ArgumentParser]) 
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--no-report", action="store_true", help="skip the report")
     p.set_defaults(func=_run)
+
+    p = sub.add_parser("export", help="a run's episodes in other formats (rosbag2)")
+    p.add_argument("output", type=Path, help="the experiment's output folder")
+    p.add_argument("--rosbag", action="store_true", required=True,
+                   help="each episode as a rosbag2 (MCAP) folder in OUTPUT/bags (needs the ros extra)")  # fmt: skip
+    p.set_defaults(func=_export)
 
     p = sub.add_parser("report", parents=[shared["report"]],
                        help="tables, figures and an HTML page of a run's results")  # fmt: skip

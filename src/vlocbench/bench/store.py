@@ -312,7 +312,16 @@ class ResultStore:
 
     def read_table(self, key: str, name: str) -> dict[str, np.ndarray]:
         """One episode's ``trajectory`` or ``localizations`` table as numpy columns."""
-        import pyarrow.parquet as pq
+        return read_episode_table(self.root, key, name)
 
-        table = pq.read_table(self.episode_dir(key) / f"{name}.parquet")
-        return {c: table.column(c).to_numpy(zero_copy_only=False) for c in table.column_names}
+
+def read_episode_table(output_dir: str | Path, key: str, name: str) -> dict[str, np.ndarray]:
+    """One stored episode's ``trajectory`` or ``localizations`` table as numpy columns, without
+    the lock (a committed episode's tables never change)."""
+    import pyarrow.parquet as pq
+
+    path = Path(output_dir) / EPISODES_DIR / key / f"{name}.parquet"
+    if not path.is_file():
+        raise StoreError(f"{output_dir} has no {name} table for episode {key}")
+    table = pq.read_table(path)
+    return {c: table.column(c).to_numpy(zero_copy_only=False) for c in table.column_names}

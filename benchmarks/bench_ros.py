@@ -1,0 +1,83 @@
+"""The localization node's overhead: image-to-pose round trip through `vlocbench ros localize` (its
+own process, loopback DDS) against the same localization in process (SIFT, 800x600, town10's map).
+
+The node localizes the latest image on its timer; at `--rate` Hz the wait for the next tick is at
+most 1/rate, part of the overhead measured. Prints medians over `--repeats` images after a warm-up.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from vlocbench.ros.environment import local_only
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--map", type=Path, required=True, help="a SIFT map of 800x600 images")
+    ap.add_argument("--repeats", type=int, default=15)
+    ap.add_argument("--rate", type=float, default=100.0, help="the node's localization_frequence")
+    args = ap.parse_args()
+    env = local_only(os.environ)
+    env.setdefault("ROS_DOMAIN_ID", "91")
+
+    import rclpy
+    from builtin_interfaces.msg import Time
+    from geometry_msgs.msg import PoseWithCovarianceStamped
+    from rclpy.node import Node
+    from sensor_msgs.msg import Image
+
+    from vlocbench.loc.gallery import Gallery
+    from vlocbench.loc.localizer import MapLocalizer
+    from vlocbench.ros.messages import msg_from_image
+
+    gallery = Gallery.load(json.loads((args.map / "map.json").read_text())["gallery"])
+    camera = next(iter(gallery.cameras.values()))
+    images = [gallery.load_image(gallery.names[k]) for k in range(5, 5 + 7 * args.repeats, 7)]
+    localizer = MapLocalizer(args.map)
+    localizer.localize(images[0], camera)  # warm-up
+    node_proc = subprocess.Popen(
+        [sys.executable, "-m", "vlocbench.cli", "ros", "localize", "--map", str(args.map),
+         "--ros-args", "-p", f"localization_frequence:={args.rate}"], env=env,
+    )  # fmt: skip
+    rclpy.init()
+    probe = Node("bench_ros")
+    got: list[float] = []
+    probe.create_subscription(PoseWithCovarianceStamped, "visual_pose_estimate",
+                              lambda m: got.append(time.perf_counter()), 10)  # fmt: skip
+    pub = probe.create_publisher(Image, "image", 10)
+    while pub.get_subscription_count() == 0:
+        rclpy.spin_once(probe, timeout_sec=0.1)
+    # alternating, so that whatever else loads the machine weighs on both alike
+    in_process, round_trip = [], []
+    for k, image in enumerate([images[0], *images]):  # the first is a warm-up
+        t = time.perf_counter()
+        localizer.localize(image, camera)
+        in_process.append(time.perf_counter() - t)
+        msg = msg_from_image(image, Time(sec=k + 1), "camera")
+        got.clear()
+        t = time.perf_counter()
+        pub.publish(msg)
+        while not got and time.perf_counter() - t < 30:
+            rclpy.spin_once(probe, timeout_sec=0.005)
+        if k and got:
+            round_trip.append(got[0] - t)
+    node_proc.send_signal(signal.SIGINT)
+    node_proc.wait(timeout=30)
+    probe.destroy_node()
+    rclpy.shutdown()
+    a, b = statistics.median(in_process[1:]), statistics.median(round_trip)
+    print(f"in process: {1000 * a:.0f} ms; through the node at {args.rate:g} Hz: {1000 * b:.0f} ms "
+          f"(median of {len(round_trip)}); overhead {1000 * (b - a):.0f} ms")  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,38 @@
+import numpy as np
+import pytest
+
+pytest.importorskip("rosbags")
+
+from rosbags.rosbag2 import Reader
+from rosbags.typesys import Stores, get_typestore
+
+from tests.bench.fakes import synthetic_result
+from tests.bench.test_store import _row
+from vlocbench.bench.store import ResultStore
+from vlocbench.cli import main
+
+
+def test_a_run_exports_as_bags_that_read_back(tmp_path, capsys):
+    with ResultStore(tmp_path, "exp") as store:
+        store.start_run("r", {"name": "exp"}, ["a", "b"])
+        store.write_episode(_row("a"), synthetic_result(1, queries=4))
+        store.write_episode(_row("b", "error"), None)
+    assert main(["export", str(tmp_path), "--rosbag"]) == 0
+    assert "wrote 1 bags" in capsys.readouterr().out
+    typestore = get_typestore(Stores.ROS2_KILTED)
+    with Reader(tmp_path / "bags" / "a") as reader:
+        counts = {c.topic: c.msgcount for c in reader.connections}
+        assert counts == {"/ground_truth/odom": 50, "/ekf/odom": 50, "/visual_pose_estimate": 4,
+                          "/visual_pose_truth": 4}  # fmt: skip
+        estimates = [
+            (t, typestore.deserialize_cdr(raw, c.msgtype))
+            for c, t, raw in reader.messages()
+            if c.topic == "/visual_pose_estimate"
+        ]
+    t_ns, first = estimates[0]
+    assert first.header.frame_id == "map" and first.pose.pose.position.x == pytest.approx(0.1)
+    assert t_ns == pytest.approx(0.2e9)  # written when it reached the EKF, after its latency
+    assert (first.header.stamp.sec, first.header.stamp.nanosec) == (0, 0)  # its image's time
+    assert np.allclose(np.reshape(first.pose.covariance, (6, 6)), np.eye(6) * 0.1)
+    assert main(["export", str(tmp_path), "--rosbag"]) == 0  # bags already there are kept
+    assert "wrote 0 bags" in capsys.readouterr().out
