@@ -123,9 +123,39 @@ def to_dict(config: Any) -> Any:
     return config
 
 
+# field metadata of an option added after results were stored: at its default it is left out of
+# config_hash, so that adding it changes no existing key
+ADDED_OPTION = {"hash": "omit_default"}
+
+
+def _hashed(config: Any) -> Any:
+    """``to_dict`` for hashing: ADDED_OPTION fields at their default are left out."""
+    if dataclasses.is_dataclass(config) and not isinstance(config, type):
+        out = {}
+        for f in dataclasses.fields(config):
+            value = getattr(config, f.name)
+            if f.metadata.get("hash") == "omit_default" and value == _default(f):
+                continue
+            out[f.name] = _hashed(value)
+        return out
+    if isinstance(config, list | tuple):
+        return [_hashed(v) for v in config]
+    if isinstance(config, dict):
+        return {str(k): _hashed(v) for k, v in config.items()}
+    return config
+
+
+def _default(f: dataclasses.Field) -> Any:
+    if f.default is not dataclasses.MISSING:
+        return f.default
+    if f.default_factory is not dataclasses.MISSING:
+        return f.default_factory()
+    return dataclasses.MISSING
+
+
 def config_hash(config: Any, length: int = 12) -> str:
     """A stable short hash of a config's resolved values (canonical JSON, SHA-256)."""
-    text = json.dumps(to_dict(config), sort_keys=True, separators=(",", ":"))
+    text = json.dumps(_hashed(config), sort_keys=True, separators=(",", ":"))
     return hashlib.sha256(text.encode()).hexdigest()[:length]
 
 

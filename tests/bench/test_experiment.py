@@ -159,3 +159,21 @@ def test_episode_keys_are_stable():
     keys = sorted(t.key for t in spec.tasks(maps))
     assert len(keys) == 102
     assert hashlib.sha1(" ".join(keys).encode()).hexdigest()[:12] == "7a8e70c46d47"
+
+
+def test_a_ros_node_is_a_method_without_a_map():
+    plan = _spec(
+        methods=["sift-vlad", {"name": "my-node", "localizer": {"ros": {"image_topic": "cam",
+                                                                       "timeout_s": 5}}}],
+    )  # fmt: skip
+    node = plan.spec.methods[1]
+    assert not node.needs_map and node.localizer.ros.image_topic == "cam"
+    tasks = plan.tasks({("town10", "sift-vlad"): "/cache/maps/g1/sift-vlad-1"})  # none for it
+    assert {t.map_dir for t in tasks if t.method_name == "my-node"} == {None}
+    # an option added later changes no key of the methods that do not use it
+    assert {t.key for t in tasks if t.method_name == "sift-vlad"} <= {
+        t.key for t in _spec().tasks(MAPS)
+    }
+    with pytest.raises(ConfigError, match="has its own features, matcher and retrieval"):
+        _spec(methods=[{"name": "n", "features": "sift", "matcher": "nn-ratio",
+                        "retrieval": "vlad", "localizer": {"ros": {}}}])  # fmt: skip

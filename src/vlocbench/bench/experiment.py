@@ -62,6 +62,10 @@ class MethodSpec:
     def __post_init__(self) -> None:
         require(bool(self.name), "methods.name", "must not be empty")
         parts = (self.features, self.matcher, self.retrieval)
+        if self.localizer.ros is not None:
+            require(not any(parts), f"methods.{self.name}",
+                    "a ROS 2 node (localizer.ros) has its own features, matcher and retrieval")  # fmt: skip
+            return
         require(
             all(parts) or not any(parts),
             f"methods.{self.name}",
@@ -69,6 +73,11 @@ class MethodSpec:
         )
         if not any(parts) and self.name not in METHODS:
             raise UnknownNameError("method", self.name, METHODS)
+
+    @property
+    def needs_map(self) -> bool:
+        """False for an external ROS 2 node, which brings its own map."""
+        return self.localizer.ros is None
 
     @property
     def conf(self) -> MethodConf:
@@ -284,7 +293,7 @@ class ExperimentPlan:
             mode="ground_truth" if kind == "recall" else "navigate",
             seed=self.spec.seed + rep,
         )
-        map_dir = map_dirs[(town, method.name)] if method else None
+        map_dir = map_dirs[(town, method.name)] if method and method.needs_map else None
         world = (
             {"traffic": setup.conditions.traffic}
             if method is None  # the baseline renders nothing

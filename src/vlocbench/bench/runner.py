@@ -120,10 +120,18 @@ def _localizer(task: EpisodeTask) -> Any:
 
     key = (task.map_dir, task.method.localizer, task.setup.cameras)
     if key not in _LOCALIZER:
+        for old in _LOCALIZER.values():
+            getattr(old, "close", lambda: None)()
         _LOCALIZER.clear()
-        _LOCALIZER[key] = VisualLocalizer(
-            task.map_dir, task.setup.cameras, task.method.localizer, task.method.name
-        )
+        endpoint = task.method.localizer.ros
+        if endpoint is not None:
+            from vlocbench.ros.remote import RosLocalizer
+
+            _LOCALIZER[key] = RosLocalizer(endpoint, task.setup.cameras, task.method.name)
+        else:
+            _LOCALIZER[key] = VisualLocalizer(
+                task.map_dir, task.setup.cameras, task.method.localizer, task.method.name
+            )
     return _LOCALIZER[key]
 
 
@@ -212,7 +220,7 @@ def _prepare_town(plan: ExperimentPlan, town_name: str, cache: Path,
         logger.info(f"{town.name}: gallery captured in {time.perf_counter() - t:.0f} s")
     gallery = Gallery.load(gallery_dir)
     out = {}
-    for method in spec.methods:
+    for method in (m for m in spec.methods if m.needs_map):
         mapping = method.mapping or spec.mapping
         map_dir = default_map_dir(cache / "maps", gallery, method.name, method.conf, mapping)
         if not (map_dir / MAP_FILE).exists():

@@ -19,7 +19,7 @@ import numpy as np
 import pycolmap
 from numpy.typing import NDArray
 
-from vlocbench.config import require
+from vlocbench.config import ADDED_OPTION, require
 from vlocbench.errors import LocalizationError
 from vlocbench.geometry import invert_pose
 from vlocbench.loc.features import Features, check_image
@@ -37,6 +37,25 @@ MIN_PNP_POINTS = 4  # P3P's minimal sample and one point to choose among its sol
 
 
 @dataclass(frozen=True)
+class RosEndpoint:
+    """A localization node outside this process, reached over ROS 2 (``vlocbench.ros``): each query
+    image goes out on ``image_topic`` (its camera on ``camera_info_topic``), and the answer is the
+    ``PoseWithCovarianceStamped`` of the base on ``pose_topic`` stamped with the image's time (a
+    ``diagnostics`` status for that stamp without a pose is a failure); ``timeout_s`` (wall clock)
+    without either is a failure too."""
+
+    image_topic: str = "image"
+    camera_info_topic: str = "camera_info"
+    pose_topic: str = "visual_pose_estimate"
+    timeout_s: float = 30.0
+
+    def __post_init__(self) -> None:
+        for name in ("image_topic", "camera_info_topic", "pose_topic"):
+            require(bool(getattr(self, name)), f"localizer.ros.{name}", "must not be empty")
+        require(self.timeout_s > 0, "localizer.ros.timeout_s", "must be > 0")
+
+
+@dataclass(frozen=True)
 class LocalizerConfig:
     top_k: int = 5
     ransac_max_error_px: float = 12.0
@@ -50,6 +69,8 @@ class LocalizerConfig:
     # accumulate, and stop once a pose has this many inliers; saves most of the matching time of
     # slow matchers (LightGlue). 0: match every retrieved image, one PnP per cluster.
     confident_inliers: int = 0
+    # an external ROS 2 node answers instead of a map in this process (``vlocbench.ros``)
+    ros: RosEndpoint | None = field(default=None, metadata=ADDED_OPTION)
 
     def __post_init__(self) -> None:
         require(self.top_k >= 1, "localizer.top_k", "must be >= 1")

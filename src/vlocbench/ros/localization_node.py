@@ -156,11 +156,12 @@ class LocalizationNode(Node):
         if msg is None:
             return
         start = time.perf_counter()
+        stamp = f"{msg.header.stamp.sec}.{msg.header.stamp.nanosec:09d}"
         try:
             result = self._localize(msg, info, prior)
         except VlocbenchError as exc:
             self.get_logger().error(f"bad input: {exc}")
-            self._status(DiagnosticStatus.ERROR, "bad input", str(exc))
+            self._status(DiagnosticStatus.ERROR, "bad input", str(exc), stamp=stamp)
             return
         seconds = time.perf_counter() - start
         if result.success and result.world_from_cam is not None:
@@ -177,7 +178,7 @@ class LocalizationNode(Node):
             result.reason,
             inliers=result.num_inliers,
             computation_time_s=seconds,
-            stamp=f"{msg.header.stamp.sec}.{msg.header.stamp.nanosec:09d}",
+            stamp=stamp,
         )
         if self.marker_pub is not None:
             self.marker_pub.publish(self._markers(result, msg))

@@ -1,0 +1,118 @@
+"""Any ROS 2 localization node as a benchmark method: a :class:`~vlocbench.bench.Localizer` that
+sends each query image to the node and waits for its answer.
+
+The episode waits (it stays synchronous, so a drive is as deterministic as the node); the image is
+stamped with the episode's simulated time and the answer is the pose stamped alike. Our own node
+(``vlocbench ros localize``) reports a failure on ``diagnostics`` with the image's stamp; for a node
+that stays silent on failure, ``timeout_s`` ends the wait.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from typing import Any
+
+from vlocbench.bench.localizer import LocalizationQuery, PoseEstimate
+from vlocbench.bench.visual import camera_model
+from vlocbench.errors import ConfigError
+from vlocbench.loc.localizer import RosEndpoint
+from vlocbench.ros.environment import local_only
+from vlocbench.sim import Camera
+
+
+def _stamp_key(sec: int, nanosec: int) -> str:
+    return f"{sec}.{nanosec:09d}"  # as the localization node reports it on diagnostics
+
+
+class RosLocalizer:
+    """Localizes through the node at ``endpoint``; one camera (the node's)."""
+
+    uses_ground_truth = False
+
+    def __init__(self, endpoint: RosEndpoint, cameras: Sequence[Camera], name: str) -> None:
+        if len(cameras) != 1:
+            raise ConfigError("localizer.ros", f"a ROS node takes one camera, not {len(cameras)}")
+        local_only()
+        import rclpy
+        from diagnostic_msgs.msg import DiagnosticArray
+        from geometry_msgs.msg import PoseWithCovarianceStamped
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.node import Node
+        from sensor_msgs.msg import CameraInfo, Image
+
+        self.name, self.endpoint, self._cameras = name, endpoint, tuple(cameras)
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context)
+        self.node = Node("vlocbench_episode", context=self.context)
+        self.image_pub = self.node.create_publisher(Image, endpoint.image_topic, 10)
+        self.info_pub = self.node.create_publisher(CameraInfo, endpoint.camera_info_topic, 10)
+        self.poses: dict[str, Any] = {}
+        self.failures: dict[str, str] = {}
+        self.node.create_subscription(PoseWithCovarianceStamped, endpoint.pose_topic,
+                                      self._on_pose, 10)  # fmt: skip
+        self.node.create_subscription(DiagnosticArray, "diagnostics", self._on_status, 10)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+
+    @property
+    def cameras(self) -> Sequence[Camera]:
+        return self._cameras
+
+    def _on_pose(self, msg: Any) -> None:
+        self.poses[_stamp_key(msg.header.stamp.sec, msg.header.stamp.nanosec)] = msg
+
+    def _on_status(self, msg: Any) -> None:
+        for status in msg.status:
+            values = {kv.key: kv.value for kv in status.values}
+            if "stamp" in values and values.get("state") != "localized":
+                self.failures[values["stamp"]] = status.message
+
+    def reset(self, seed: int) -> None:
+        self.poses.clear()
+        self.failures.clear()
+
+    def _wait_for_node(self) -> None:
+        deadline = time.monotonic() + self.endpoint.timeout_s
+        while self.image_pub.get_subscription_count() == 0:
+            if time.monotonic() > deadline:
+                raise ConfigError(
+                    "localizer.ros",
+                    f"no node subscribes to {self.endpoint.image_topic!r} "
+                    f"after {self.endpoint.timeout_s:g} s",
+                )
+            self.executor.spin_once(timeout_sec=0.05)
+
+    def localize(self, query: LocalizationQuery) -> PoseEstimate:
+        from builtin_interfaces.msg import Time
+
+        from vlocbench.ros.messages import info_from_camera, msg_from_image, pose_from_msg
+
+        self._wait_for_node()
+        start = time.perf_counter()
+        ns = round(query.time_s * 1e9)
+        stamp = Time(sec=ns // 10**9, nanosec=ns % 10**9)
+        key = _stamp_key(stamp.sec, stamp.nanosec)
+        frame = query.frames[0]
+        self.info_pub.publish(
+            info_from_camera(camera_model(frame.camera), stamp, frame.camera.name)
+        )
+        self.image_pub.publish(msg_from_image(frame.image, stamp, frame.camera.name))
+        deadline = time.monotonic() + self.endpoint.timeout_s
+        while key not in self.poses and key not in self.failures:
+            if time.monotonic() > deadline:
+                return PoseEstimate.failure(
+                    f"no answer from {self.endpoint.pose_topic!r} within "
+                    f"{self.endpoint.timeout_s:g} s", time.perf_counter() - start
+                )  # fmt: skip
+            self.executor.spin_once(timeout_sec=0.01)
+        elapsed = time.perf_counter() - start
+        if key in self.poses:
+            msg = self.poses.pop(key)
+            return PoseEstimate(True, pose_from_msg(msg.pose.pose), None, elapsed)
+        return PoseEstimate.failure(self.failures.pop(key), elapsed)
+
+    def close(self) -> None:
+        self.executor.shutdown()
+        self.node.destroy_node()
+        self.context.try_shutdown()
