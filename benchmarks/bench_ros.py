@@ -1,8 +1,12 @@
-"""The localization node's overhead: image-to-pose round trip through `vlocbench ros localize` (its
-own process, loopback DDS) against the same localization in process (SIFT, 800x600, town10's map).
+"""The ROS 2 nodes' speed.
 
+`--map MAP`: the localization node's overhead, the image-to-pose round trip through `vlocbench ros
+localize` (its own process, loopback DDS) against the same localization in process (SIFT, 800x600).
 The node localizes the latest image on its timer; at `--rate` Hz the wait for the next tick is at
-most 1/rate, part of the overhead measured. Prints medians over `--repeats` images after a warm-up.
+most 1/rate, part of the overhead measured. Medians over `--repeats` images after a warm-up.
+
+`--sim TOWN`: the simulator node as fast as it goes (20 Hz steps, one 800x600 camera at 2 Hz,
+driving on cmd_vel): simulated seconds per wall second, median of `--repeats` 10 s stretches.
 """
 
 from __future__ import annotations
@@ -22,12 +26,18 @@ from vlocbench.ros.environment import local_only
 
 def main() -> None:
     ap = argparse.ArgumentParser()
-    ap.add_argument("--map", type=Path, required=True, help="a SIFT map of 800x600 images")
+    ap.add_argument("--map", type=Path, help="a SIFT map of 800x600 images")
+    ap.add_argument("--sim", help="a town for the simulator node instead")
     ap.add_argument("--repeats", type=int, default=15)
     ap.add_argument("--rate", type=float, default=100.0, help="the node's localization_frequence")
     args = ap.parse_args()
     env = local_only(os.environ)
     env.setdefault("ROS_DOMAIN_ID", "91")
+    if args.sim:
+        sim_speed(args.sim, args.repeats)
+        return
+    if args.map is None:
+        ap.error("give --map or --sim")
 
     import rclpy
     from builtin_interfaces.msg import Time
@@ -77,6 +87,31 @@ def main() -> None:
     a, b = statistics.median(in_process[1:]), statistics.median(round_trip)
     print(f"in process: {1000 * a:.0f} ms; through the node at {args.rate:g} Hz: {1000 * b:.0f} ms "
           f"(median of {len(round_trip)}); overhead {1000 * (b - a):.0f} ms")  # fmt: skip
+
+
+def sim_speed(town: str, repeats: int) -> None:
+    import rclpy
+    from geometry_msgs.msg import Twist
+    from rclpy.parameter import Parameter
+
+    from vlocbench.ros.sim_node import SimulatorNode
+
+    rclpy.init()
+    node = SimulatorNode(town, parameter_overrides=[Parameter("real_time_factor", value=0.0)])
+    command = Twist()
+    command.linear.x = 4.0
+    node.command = command
+    factors = []
+    for k in range(repeats + 1):  # the first is a warm-up
+        t0, wall0 = node.sim.state.time_s, time.perf_counter()
+        while node.sim.state.time_s - t0 < 10.0:
+            rclpy.spin_once(node, timeout_sec=0.0)
+        if k:
+            factors.append((node.sim.state.time_s - t0) / (time.perf_counter() - wall0))
+    node.destroy_node()
+    rclpy.shutdown()
+    print(f"simulator node, {town}: {statistics.median(factors):.1f}x real time "
+          f"(20 Hz, one 800x600 camera at 2 Hz; median of {repeats} 10 s stretches)")  # fmt: skip
 
 
 if __name__ == "__main__":

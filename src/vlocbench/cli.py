@@ -430,32 +430,63 @@ def _add_ros_verbs(sub: Any, shared: dict[str, argparse.ArgumentParser]) -> None
     )
     q.add_argument("--map", type=Path, required=True, help="map folder (vlocbench build-map)")
     q.set_defaults(func=_ros_localize)
+    q = verbs.add_parser(
+        "sim",
+        parents=[shared["town"]],
+        help="the simulator as a ROS 2 world (clock, cameras, odometry, cmd_vel)",
+        description="Parameters: camera_rate_hz (2), real_time_factor (1; 0: as fast as "
+        "possible), seed; set them with --ros-args -p NAME:=VALUE.",
+    )
+    q.add_argument("--config", type=Path, help="YAML with conditions and cameras (as experiments)")
+    q.set_defaults(func=_ros_sim)
 
 
 def _ros_localize(args: argparse.Namespace) -> int:
+    def make() -> Any:
+        from rclpy.parameter import Parameter
+
+        from vlocbench.ros.localization_node import LocalizationNode
+
+        return LocalizationNode(
+            parameter_overrides=[Parameter("map_dir", Parameter.Type.STRING, str(args.map))]
+        )
+
+    return _spin_node(make, args.ros_args)
+
+
+def _ros_sim(args: argparse.Namespace) -> int:
+    def make() -> Any:
+        from vlocbench.ros.sim_node import SimulatorNode
+
+        return SimulatorNode(args.town, args.config)
+
+    return _spin_node(make, args.ros_args)
+
+
+def _spin_node(make: Any, ros_args: list[str]) -> int:
+    """Start rclpy (discovery on this machine unless set), spin the node ``make()`` builds until
+    Ctrl-C or SIGTERM, and clean up."""
     from vlocbench.errors import MachineError
     from vlocbench.ros.environment import local_only
 
     local_only()
     try:
         import rclpy
-        from rclpy.parameter import Parameter
-
-        from vlocbench.ros.localization_node import LocalizationNode
     except ImportError as exc:
         raise MachineError(
             f"ROS 2 is not installed ({exc}): pip install 'vlocbench[ros]'"
         ) from None
-    rclpy.init(args=["vlocbench", *args.ros_args])
-    node = LocalizationNode(
-        parameter_overrides=[Parameter("map_dir", Parameter.Type.STRING, str(args.map))]
-    )
+    rclpy.init(args=["vlocbench", *ros_args])
+    node = None
     try:
-        rclpy.spin(node)
+        node = make()
+        with _signals_interrupt():
+            rclpy.spin(node)
     except KeyboardInterrupt:
         pass
     finally:
-        node.destroy_node()
+        if node is not None:
+            node.destroy_node()
         rclpy.try_shutdown()
     return 0
 
