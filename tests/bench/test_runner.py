@@ -309,3 +309,23 @@ def test_cli_run_and_report_errors(tiny, tmp_path, capsys):
     assert main(["report", str(root / "out"), "--no-examples"]) == 0
     assert "index.html" in capsys.readouterr().out
     assert os.path.exists(root / "out" / "report" / "tables.md")
+
+
+def test_episodes_another_sweep_ran_first_count_under_this_plans_setups(tmp_path):
+    """The reduced sweep's k = 0 episodes were first run as a one-level sweep ("default")."""
+    base = {"name": "ill", "towns": ["town10"], "methods": ["sift-vlad"], "repetitions": 1}
+    maps = {("town10", "sift-vlad"): "/nowhere/g/m"}
+    first = load_experiment({**base, "sweep": {"illumination.k": [0]}})
+    second = load_experiment({**base, "sweep": {"illumination.k": [0, 6]}})
+    with ResultStore(tmp_path, "ill") as store:
+        for plan in (first, second):
+            tasks = plan.tasks(maps)
+            store.start_run(plan.spec.spec_hash, to_dict(plan), [t.key for t in tasks])
+            todo = [t for t in tasks if t.key not in store.done_keys()]
+            execute(todo, store, workers=1, runner=run_fake, progress=False)
+    stored, rows = read_latest_run(tmp_path)
+    assert {r.setup for r in rows} == {"default", "illumination.k=6"}  # as each run stored them
+    summary = summarize(plan_from_stored(stored), rows)
+    for label in ("illumination.k=0", "illumination.k=6"):
+        cell = summary.cell("town10", "sift-vlad", label)
+        assert cell is not None and cell.failure is not None and cell.recall is not None, label

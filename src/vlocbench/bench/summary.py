@@ -124,6 +124,23 @@ def _cell(key: tuple[str, str, str], group: list[EpisodeRow], errors: int) -> Ce
     )
 
 
+class _MapDirs(dict):
+    """The map folders the stored episodes name; a method without episodes gets a placeholder
+    (its keys then match no row)."""
+
+    def __missing__(self, key: tuple[str, str]) -> str:
+        return "/no-episodes"
+
+
+def _setup_labels(plan: ExperimentPlan, rows: Sequence[EpisodeRow]) -> dict[str, str]:
+    """Each episode key's setup label in *this* plan: an episode another experiment ran first
+    (same key, shared through the store) is stored under that experiment's label."""
+    map_dirs = _MapDirs(
+        ((r.config["town"], r.method), r.config["map_dir"]) for r in rows if r.config.get("map_dir")
+    )
+    return {t.key: t.setup.label for t in plan.tasks(map_dirs) if t.method is not None}
+
+
 def summarize(plan: ExperimentPlan, rows: Sequence[EpisodeRow]) -> Summary:
     """Aggregate ``rows`` (one run's episodes) by town, method and setup."""
     spec, the_setups = plan.spec, plan.setups
@@ -133,6 +150,7 @@ def summarize(plan: ExperimentPlan, rows: Sequence[EpisodeRow]) -> Summary:
         s.label: _baseline_drive(to_dict(s.conditions.traffic), to_dict(s.episode))
         for s in the_setups
     }
+    label_of = _setup_labels(plan, rows)
     for r in ok:
         if r.method == BASELINE:  # a baseline serves every setup with its traffic and settings
             drive = _baseline_drive(r.config["setup"]["conditions"]["traffic"], r.config["episode"])
@@ -140,11 +158,11 @@ def summarize(plan: ExperimentPlan, rows: Sequence[EpisodeRow]) -> Summary:
                 if drive_of[s.label] == drive:
                     by[(r.config["town"], BASELINE, s.label)].append(r)
         else:
-            by[(r.config["town"], r.method, r.setup)].append(r)
+            by[(r.config["town"], r.method, label_of.get(r.key, r.setup))].append(r)
     errors_by: dict[tuple[str, str, str], int] = defaultdict(int)
     for r in rows:
         if r.status != "ok":
-            errors_by[(r.config["town"], r.method, r.setup)] += 1
+            errors_by[(r.config["town"], r.method, label_of.get(r.key, r.setup))] += 1
     cells = {key: _cell(key, group, errors_by.get(key, 0)) for key, group in by.items()}
     methods = tuple(m.name for m in spec.methods) + ((BASELINE,) if spec.baseline else ())
     town_names = {t: t for t in spec.towns} | {r.config["town"]: r.town for r in rows}
