@@ -476,13 +476,14 @@ def _spin_node(make: Any, ros_args: list[str]) -> int:
         raise MachineError(
             f"ROS 2 is not installed ({exc}): pip install 'vlocbench[ros]'"
         ) from None
+    from rclpy.executors import ExternalShutdownException
+
     rclpy.init(args=["vlocbench", *ros_args])
     node = None
     try:
         node = make()
-        with _signals_interrupt():
-            rclpy.spin(node)
-    except KeyboardInterrupt:
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):  # Ctrl-C, SIGTERM (rclpy's handlers)
         pass
     finally:
         if node is not None:

@@ -31,7 +31,9 @@ def render(sim, conditions, camera=None, waypoint=10):
     sim.teleport(float(wp[0]), float(wp[1]), float(sim.town.route.yaw_rad[waypoint]))
     sim.set_conditions(conditions)
     camera = camera or Camera("g", SMALL, Extrinsics())
-    return sim.render([camera])[0]
+    # an explicit frame id: the noise would otherwise follow the clock of the session's shared
+    # simulator, which other tests advance
+    return sim.render([camera], frame_id=waypoint)[0]
 
 
 def gray(frame):
