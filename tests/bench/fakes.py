@@ -33,7 +33,8 @@ def synthetic_result(failures: int, queries: int = 4, lock_losses: int = 0) -> E
     zero = np.zeros(n)
     trajectory = Trajectory(
         time_s=t, true_x_m=t * 4, true_y_m=zero, true_yaw_rad=zero, ekf_x_m=t * 4 + 0.1,
-        ekf_y_m=zero, ekf_yaw_rad=zero, speed_mps=zero + 4,
+        ekf_y_m=zero, ekf_yaw_rad=zero, speed_mps=zero + 4, odometry_speed_mps=zero + 4.1,
+        odometry_yaw_rate_radps=zero + 0.01,
     )  # fmt: skip
     reinit = tuple(
         Reinitialization(

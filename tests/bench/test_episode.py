@@ -69,6 +69,10 @@ def test_ground_truth_drive_completes_on_the_route(sim, path):
     tr = r.trajectory
     assert len(tr.time_s) == round(r.sim_time_s / sim.dt_s) + 1
     assert 3.5 < np.percentile(tr.speed_mps, 75) < 4.3
+    # the wheel odometry the EKF got for each step: noisy around the true speed (sigma 4 %)
+    assert np.isfinite(tr.odometry_speed_mps[:-1]).all() and np.isnan(tr.odometry_speed_mps[-1])
+    rel = (tr.odometry_speed_mps[:-1] - tr.speed_mps[1:])[tr.speed_mps[1:] > 3] / 4.0
+    assert 0.02 < np.std(rel) < 0.06
 
 
 def test_ground_truth_drive_resets_the_ekf_when_it_loses_lock(sim, path):

@@ -22,8 +22,12 @@ def test_a_run_exports_as_bags_that_read_back(tmp_path, capsys):
     typestore = get_typestore(Stores.ROS2_KILTED)
     with Reader(tmp_path / "bags" / "a") as reader:
         counts = {c.topic: c.msgcount for c in reader.connections}
-        assert counts == {"/ground_truth/odom": 50, "/ekf/odom": 50, "/visual_pose_estimate": 4,
-                          "/visual_pose_truth": 4}  # fmt: skip
+        assert counts == {"/ground_truth/odom": 50, "/ekf/odom": 50, "/wheel_odometry": 50,
+                          "/visual_pose_estimate": 4, "/visual_pose_truth": 4}  # fmt: skip
+        wheel = next(typestore.deserialize_cdr(raw, c.msgtype) for c, _, raw in reader.messages()
+                     if c.topic == "/wheel_odometry")  # fmt: skip
+        assert wheel.twist.twist.linear.x == pytest.approx(4.1)
+        assert wheel.twist.covariance[0] == pytest.approx((0.04 * 4.1) ** 2)  # the paper's model
         estimates = [
             (t, typestore.deserialize_cdr(raw, c.msgtype))
             for c, t, raw in reader.messages()

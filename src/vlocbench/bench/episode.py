@@ -123,14 +123,21 @@ class _InFlight:
 
 
 class _Columns:
+    """The trajectory's rows in the order of Trajectory's fields; a row's wheel odometry is the
+    reading over the step that starts at its time (NaN until that step ran)."""
+
     def __init__(self) -> None:
-        self.rows: list[tuple[float, ...]] = []
+        self.rows: list[list[float]] = []
 
     def add(self, t: float, s: VehicleState, ekf: tuple[float, float, float]) -> None:
-        self.rows.append((t, s.x_m, s.y_m, s.yaw_rad, *ekf, s.speed_mps))
+        self.rows.append([t, s.x_m, s.y_m, s.yaw_rad, *ekf, s.speed_mps, np.nan, np.nan])
+
+    def odometry(self, reading: OdometryReading) -> None:
+        if self.rows:
+            self.rows[-1][-2:] = [reading.speed_mps, reading.yaw_rate_radps]
 
     def trajectory(self) -> Trajectory:
-        names = [f.name for f in dataclasses.fields(Trajectory)]  # the order add() writes
+        names = [f.name for f in dataclasses.fields(Trajectory)]
         a = np.asarray(self.rows, dtype=np.float64).reshape(-1, len(names))
         return Trajectory(**{name: a[:, k].copy() for k, name in enumerate(names)})
 
@@ -337,7 +344,10 @@ class Episode:
         result = self.sim.step(cmd)
         new = result.state
         self.distance_m += float(np.hypot(new.x_m - state.x_m, new.y_m - state.y_m))
-        self.ekf.predict(self._odometry(state, new), self.dt_s)
+        reading = self._odometry(state, new)
+        if c.record_trajectory:
+            self.columns.odometry(reading)
+        self.ekf.predict(reading, self.dt_s)
         proj = self.progress.update(np.array([new.x_m, new.y_m]))
         self.offsets_m.append(proj.distance_m)
         failure = next(

@@ -79,7 +79,8 @@ class Segment:
 
 @dataclass(frozen=True, kw_only=True)
 class Trajectory:
-    """Per-step columns, all (N,): time, true pose, EKF pose, true speed."""
+    """Per-step columns, all (N,): time, true pose, EKF pose, true speed, and the wheel odometry
+    the EKF got for the step that starts there (NaN in the last row)."""
 
     time_s: Array
     true_x_m: Array
@@ -89,6 +90,8 @@ class Trajectory:
     ekf_y_m: Array
     ekf_yaw_rad: Array
     speed_mps: Array
+    odometry_speed_mps: Array
+    odometry_yaw_rate_radps: Array
 
     @property
     def ekf_position_error_m(self) -> Array:

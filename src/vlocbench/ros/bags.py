@@ -2,7 +2,8 @@
 
 Per episode, in simulated time (the episode starts at 0 s): ``/ground_truth/odom`` and
 ``/ekf/odom`` (``nav_msgs/Odometry`` at every simulation step: the true pose and speed, the EKF's
-pose), ``/visual_pose_estimate`` (``geometry_msgs/PoseWithCovarianceStamped``, each answer of the
+pose), ``/wheel_odometry`` (``geometry_msgs/TwistWithCovarianceStamped``: the noisy reading the
+EKF got for each step, with the noise model's variances), ``/visual_pose_estimate`` (``geometry_msgs/PoseWithCovarianceStamped``, each answer of the
 localizer, written when it reached the EKF and stamped with its image's time, covariance the
 paper's 0.1) and ``/visual_pose_truth`` (the true pose at those image times). evo (``evo_ape bag2``),
 Foxglove and rviz read them.
@@ -18,7 +19,9 @@ from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
 from vlocbench.bench.store import read_episode_table, read_latest_run
+from vlocbench.config import from_dict
 from vlocbench.geometry import planar_pose
+from vlocbench.nav import OdometryNoise
 from vlocbench.ros.messages import quaternion_from_rotation
 
 POSE_VARIANCE = 0.1  # the paper's localization node's fixed covariance
@@ -63,9 +66,28 @@ def _pose_stamped(t_s: float, pose: Any, variance: float) -> Any:
     )
 
 
-def write_episode_bag(output_dir: str | Path, key: str, path: Path) -> Path:
+def _wheel(t_s: float, speed_mps: float, yaw_rate_radps: float, noise: OdometryNoise) -> Any:
+    sigma_v, sigma_w = noise.sigmas(speed_mps)
+    covariance = np.zeros(36)
+    covariance[0], covariance[35] = sigma_v**2, sigma_w**2
+    vector = _T["geometry_msgs/msg/Vector3"]
+    return _T["geometry_msgs/msg/TwistWithCovarianceStamped"](
+        header=_T["std_msgs/msg/Header"](stamp=_stamp(t_s), frame_id="base_link"),
+        twist=_T["geometry_msgs/msg/TwistWithCovariance"](
+            twist=_T["geometry_msgs/msg/Twist"](
+                linear=vector(x=speed_mps, y=0.0, z=0.0),
+                angular=vector(x=0.0, y=0.0, z=yaw_rate_radps),
+            ),
+            covariance=covariance,
+        ),
+    )
+
+
+def write_episode_bag(output_dir: str | Path, key: str, path: Path,
+                      noise: OdometryNoise | None = None) -> Path:  # fmt: skip
     """The episode ``key`` stored in ``output_dir`` as a rosbag2 folder (one MCAP file) at
-    ``path``."""
+    ``path``; ``noise``: the episode's odometry model (its variances go with the readings)."""
+    noise = noise or OdometryNoise()
     tr = read_episode_table(output_dir, key, "trajectory")
     locs = read_episode_table(output_dir, key, "localizations")
     writer = Writer(path, version=9, storage_plugin=StoragePlugin.MCAP)
@@ -73,6 +95,7 @@ def write_episode_bag(output_dir: str | Path, key: str, path: Path) -> Path:
         topics = {
             "/ground_truth/odom": "nav_msgs/msg/Odometry",
             "/ekf/odom": "nav_msgs/msg/Odometry",
+            "/wheel_odometry": "geometry_msgs/msg/TwistWithCovarianceStamped",
             "/visual_pose_estimate": "geometry_msgs/msg/PoseWithCovarianceStamped",
             "/visual_pose_truth": "geometry_msgs/msg/PoseWithCovarianceStamped",
         }
@@ -85,6 +108,10 @@ def write_episode_bag(output_dir: str | Path, key: str, path: Path) -> Path:
                 (t, "/ground_truth/odom", _odometry(t, truth, tr["speed_mps"][k], "base_link"))
             )
             messages.append((t, "/ekf/odom", _odometry(t, ekf, tr["speed_mps"][k], "base_link")))
+            speed = tr.get("odometry_speed_mps")  # episodes stored before it have none
+            if speed is not None and np.isfinite(speed[k]):
+                reading = _wheel(t, speed[k], tr["odometry_yaw_rate_radps"][k], noise)
+                messages.append((t, "/wheel_odometry", reading))
         for k, t in enumerate(locs.get("time_s", [])):
             if not locs["success"][k]:
                 continue
@@ -107,7 +134,8 @@ def export_bags(output_dir: str | Path) -> list[Path]:
     out = Path(output_dir) / "bags"
     out.mkdir(parents=True, exist_ok=True)
     return [
-        write_episode_bag(output_dir, row.key, out / row.key)
+        write_episode_bag(output_dir, row.key, out / row.key,
+                          from_dict(OdometryNoise, row.config.get("episode", {}).get("odometry", {})))
         for row in rows
         if row.status == "ok" and not (out / row.key).exists()
-    ]
+    ]  # fmt: skip
