@@ -194,15 +194,17 @@ def _run(args: argparse.Namespace) -> int:
     return 1 if summary.errors else 0
 
 
-def _export(args: argparse.Namespace) -> int:
+def _missing_ros_extra(exc: ImportError) -> VlocbenchError:
     from vlocbench.errors import MachineError
 
+    return MachineError(f"the ros extra is not installed ({exc}): pip install 'vlocbench[ros]'")
+
+
+def _export(args: argparse.Namespace) -> int:
     try:
         from vlocbench.ros.bags import export_bags
     except ImportError as exc:
-        raise MachineError(
-            f"rosbags is not installed ({exc}): pip install 'vlocbench[ros]'"
-        ) from None
+        raise _missing_ros_extra(exc) from None
     written = export_bags(args.output)
     print(f"wrote {len(written)} bags to {args.output / 'bags'}")
     return 0
@@ -275,7 +277,6 @@ def _build_map(args: argparse.Namespace) -> int:
 
 
 def _localize(args: argparse.Namespace) -> int:
-    import json
 
     import cv2
     import numpy as np
@@ -285,7 +286,7 @@ def _localize(args: argparse.Namespace) -> int:
     from vlocbench.loc.localizer import MapLocalizer
 
     localizer = MapLocalizer(args.map)
-    gallery = Gallery.load(json.loads((args.map / "map.json").read_text())["gallery"])
+    gallery = Gallery.load(localizer.gallery_dir)
     camera_name = args.camera or next(iter(gallery.cameras))
     if camera_name not in gallery.cameras:
         raise LocalizationError(
@@ -466,16 +467,13 @@ def _ros_sim(args: argparse.Namespace) -> int:
 def _spin_node(make: Any, ros_args: list[str]) -> int:
     """Start rclpy (discovery on this machine unless set), spin the node ``make()`` builds until
     Ctrl-C or SIGTERM, and clean up."""
-    from vlocbench.errors import MachineError
     from vlocbench.ros.environment import local_only
 
     local_only()
     try:
         import rclpy
     except ImportError as exc:
-        raise MachineError(
-            f"ROS 2 is not installed ({exc}): pip install 'vlocbench[ros]'"
-        ) from None
+        raise _missing_ros_extra(exc) from None
     from rclpy.executors import ExternalShutdownException
 
     rclpy.init(args=["vlocbench", *ros_args])

@@ -41,6 +41,9 @@ def _convert(value: Any, annotation: Any, field: str) -> Any:
     if origin in (typing.Union, types.UnionType):
         if value is None and type(None) in args:
             return None
+        options = [a for a in args if a is not type(None)]
+        if len(options) == 1:  # an optional value: its own error names its own field
+            return _convert(value, options[0], field)
         errors = []
         for arg in (a for a in args if a is not type(None)):
             try:

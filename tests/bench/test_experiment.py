@@ -174,6 +174,10 @@ def test_a_ros_node_is_a_method_without_a_map():
     assert {t.key for t in tasks if t.method_name == "sift-vlad"} <= {
         t.key for t in _spec().tasks(MAPS)
     }
+    with pytest.raises(ConfigError, match=r"ros\.timeout_s: must be > 0"):
+        _spec(methods=[{"name": "n", "localizer": {"ros": {"timeout_s": 0}}}])
+    with pytest.raises(ConfigError, match=r"ros\.pose_topic: must not be empty"):
+        _spec(methods=[{"name": "n", "localizer": {"ros": {"pose_topic": ""}}}])
     with pytest.raises(ConfigError, match="has its own features, matcher and retrieval"):
         _spec(methods=[{"name": "n", "features": "sift", "matcher": "nn-ratio",
                         "retrieval": "vlad", "localizer": {"ros": {}}}])  # fmt: skip

@@ -40,3 +40,5 @@ def test_a_run_exports_as_bags_that_read_back(tmp_path, capsys):
     assert np.allclose(np.reshape(first.pose.covariance, (6, 6)), np.eye(6) * 0.1)
     assert main(["export", str(tmp_path), "--rosbag"]) == 0  # bags already there are kept
     assert "wrote 0 bags" in capsys.readouterr().out
+    assert main(["export", str(tmp_path / "none"), "--rosbag"]) == 1
+    assert "holds no vlocbench results" in capsys.readouterr().err

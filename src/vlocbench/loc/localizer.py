@@ -51,8 +51,8 @@ class RosEndpoint:
 
     def __post_init__(self) -> None:
         for name in ("image_topic", "camera_info_topic", "pose_topic"):
-            require(bool(getattr(self, name)), f"localizer.ros.{name}", "must not be empty")
-        require(self.timeout_s > 0, "localizer.ros.timeout_s", "must be > 0")
+            require(bool(getattr(self, name)), f"ros.{name}", "must not be empty")
+        require(self.timeout_s > 0, "ros.timeout_s", "must be > 0")
 
 
 @dataclass(frozen=True)
@@ -160,6 +160,7 @@ class MapLocalizer:
         try:
             info = json.loads(info_path.read_text())
             self.method = MethodConf(**info["method"])
+            self.gallery_dir = Path(info["gallery"])  # the gallery the map was built from
         except (json.JSONDecodeError, KeyError, TypeError) as exc:
             raise LocalizationError(f"{info_path} is corrupt: {exc!r}") from None
         try:

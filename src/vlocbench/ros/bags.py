@@ -22,7 +22,7 @@ from vlocbench.bench.store import read_episode_table, read_latest_run
 from vlocbench.config import from_dict
 from vlocbench.geometry import planar_pose
 from vlocbench.nav import OdometryNoise
-from vlocbench.ros.messages import quaternion_from_rotation
+from vlocbench.ros.messages import quaternion_from_rotation, sec_nanosec
 
 POSE_VARIANCE = 0.1  # the paper's localization node's fixed covariance
 _TS = get_typestore(Stores.ROS2_KILTED)
@@ -30,8 +30,8 @@ _T = _TS.types
 
 
 def _stamp(t_s: float) -> Any:
-    ns = round(t_s * 1e9)
-    return _T["builtin_interfaces/msg/Time"](sec=ns // 10**9, nanosec=ns % 10**9)
+    sec, nanosec = sec_nanosec(t_s)
+    return _T["builtin_interfaces/msg/Time"](sec=sec, nanosec=nanosec)
 
 
 def _pose(x_m: float, y_m: float, yaw_rad: float) -> Any:

@@ -22,7 +22,7 @@ not load) is logged and reported on ``diagnostics``; the node lives on.
 
 from __future__ import annotations
 
-import json
+import dataclasses
 import threading
 import time
 from pathlib import Path
@@ -37,11 +37,11 @@ from sensor_msgs.msg import CameraInfo
 from sensor_msgs.msg import Image as ImageMsg
 from visualization_msgs.msg import Marker, MarkerArray
 
-from vlocbench.config import to_dict
 from vlocbench.errors import VlocbenchError
 from vlocbench.geometry import invert_pose
 from vlocbench.loc.gallery import CameraModel, Gallery
 from vlocbench.loc.localizer import LocalizerConfig, MapLocalizer, QueryResult
+from vlocbench.loc.mapping import MAP_FILE
 from vlocbench.loc.registry import method_conf
 from vlocbench.ros.messages import (
     camera_from_info,
@@ -49,10 +49,11 @@ from vlocbench.ros.messages import (
     pose_from_msg,
     pose_to_msg,
     pose_with_covariance,
+    stamp_key,
 )
 from vlocbench.sim.camera import Extrinsics
 
-PAPER_SENSOR_OFFSET = (2.0, 0.0, 2.0, 0.0, 0.0, -90.0)  # the gallery camera: right, 2 m fwd/up
+PAPER_SENSOR_OFFSET = dataclasses.astuple(Extrinsics())  # the paper's gallery camera's mounting
 
 # name: (default, description); the paper's names first
 PARAMETERS: dict[str, tuple[Any, str]] = {
@@ -116,18 +117,17 @@ class LocalizationNode(Node):
         try:
             if not p["map_dir"]:
                 raise VlocbenchError("the map_dir parameter is not set")
-            info = Path(p["map_dir"]) / "map.json"
-            if not info.is_file():
-                raise VlocbenchError(f"{p['map_dir']} is not a map (no map.json)")
-            meta = json.loads(info.read_text())
-            if p["method"] and to_dict(method_conf(p["method"])) != meta.get("method"):
-                raise VlocbenchError(
-                    f"the map was built with {meta.get('method')}, not {p['method']!r}"
-                )
+            if not (Path(p["map_dir"]) / MAP_FILE).is_file():
+                raise VlocbenchError(f"{p['map_dir']} is not a map (no {MAP_FILE})")
             config = LocalizerConfig(
                 top_k=int(p["top_k_matches"]), ransac_max_error_px=float(p["ransac_thresh"])
             )
-            return MapLocalizer(p["map_dir"], config), Gallery.load(meta["gallery"]), ""
+            localizer = MapLocalizer(p["map_dir"], config)
+            if p["method"] and method_conf(p["method"]) != localizer.method:
+                raise VlocbenchError(
+                    f"the map was built with {localizer.method}, not {p['method']!r}"
+                )
+            return localizer, Gallery.load(localizer.gallery_dir), ""
         except (VlocbenchError, OSError, KeyError, ValueError) as exc:
             message = f"map {p['map_dir']!r} does not load: {exc}"
             self.get_logger().error(message)
@@ -156,7 +156,7 @@ class LocalizationNode(Node):
         if msg is None:
             return
         start = time.perf_counter()
-        stamp = f"{msg.header.stamp.sec}.{msg.header.stamp.nanosec:09d}"
+        stamp = stamp_key(msg.header.stamp)
         try:
             result = self._localize(msg, info, prior)
         except VlocbenchError as exc:

@@ -18,6 +18,22 @@ from vlocbench.loc.gallery import CameraModel
 ENCODINGS = ("rgb8", "bgr8", "mono8")
 
 
+def sec_nanosec(t_s: float) -> tuple[int, int]:
+    """A time in seconds as ROS's (sec, nanosec)."""
+    ns = round(t_s * 1e9)
+    return ns // 10**9, ns % 10**9
+
+
+def stamp_of(t_s: float) -> Time:
+    sec, nanosec = sec_nanosec(t_s)
+    return Time(sec=sec, nanosec=nanosec)
+
+
+def stamp_key(stamp: Time) -> str:
+    """A stamp as text: how the localization node names the image a status is about."""
+    return f"{stamp.sec}.{stamp.nanosec:09d}"
+
+
 def image_from_msg(msg: ImageMsg) -> Image:
     """(H, W, 3) RGB of an ``rgb8``, ``bgr8`` or ``mono8`` image message."""
     if msg.encoding not in ENCODINGS:

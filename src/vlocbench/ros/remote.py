@@ -18,11 +18,14 @@ from vlocbench.bench.visual import camera_model
 from vlocbench.errors import ConfigError
 from vlocbench.loc.localizer import RosEndpoint
 from vlocbench.ros.environment import local_only
+from vlocbench.ros.messages import (
+    info_from_camera,
+    msg_from_image,
+    pose_from_msg,
+    stamp_key,
+    stamp_of,
+)
 from vlocbench.sim import Camera
-
-
-def _stamp_key(sec: int, nanosec: int) -> str:
-    return f"{sec}.{nanosec:09d}"  # as the localization node reports it on diagnostics
 
 
 class RosLocalizer:
@@ -60,7 +63,7 @@ class RosLocalizer:
         return self._cameras
 
     def _on_pose(self, msg: Any) -> None:
-        self.poses[_stamp_key(msg.header.stamp.sec, msg.header.stamp.nanosec)] = msg
+        self.poses[stamp_key(msg.header.stamp)] = msg
 
     def _on_status(self, msg: Any) -> None:
         for status in msg.status:
@@ -84,15 +87,11 @@ class RosLocalizer:
             self.executor.spin_once(timeout_sec=0.05)
 
     def localize(self, query: LocalizationQuery) -> PoseEstimate:
-        from builtin_interfaces.msg import Time
-
-        from vlocbench.ros.messages import info_from_camera, msg_from_image, pose_from_msg
 
         self._wait_for_node()
         start = time.perf_counter()
-        ns = round(query.time_s * 1e9)
-        stamp = Time(sec=ns // 10**9, nanosec=ns % 10**9)
-        key = _stamp_key(stamp.sec, stamp.nanosec)
+        stamp = stamp_of(query.time_s)
+        key = stamp_key(stamp)
         frame = query.frames[0]
         self.info_pub.publish(
             info_from_camera(camera_model(frame.camera), stamp, frame.camera.name)

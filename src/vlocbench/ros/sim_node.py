@@ -34,24 +34,16 @@ from vlocbench.errors import ConfigError
 from vlocbench.geometry import planar_pose
 from vlocbench.interfaces import Control
 from vlocbench.nav import ControllerConfig, OdometryNoise, Pid, WheelOdometry
-from vlocbench.ros.messages import info_from_camera, msg_from_image, pose_to_msg
+from vlocbench.nav.control import MPS_TO_KMH
+from vlocbench.ros.messages import info_from_camera, msg_from_image, pose_to_msg, stamp_of
 from vlocbench.sim import Camera, Conditions, Simulator, gallery_camera
 from vlocbench.sim.town import generate_town, load_town_spec
-
-MPS_TO_KMH = 3.6
 
 PARAMETERS: dict[str, tuple[Any, str]] = {
     "camera_rate_hz": (2.0, "images per second of every camera (simulated time)"),
     "real_time_factor": (1.0, "simulated seconds per wall second; 0: as fast as possible"),
     "seed": (0, "seed of the wheel odometry's noise"),
 }
-
-
-def _stamp(t_s: float) -> Any:
-    from builtin_interfaces.msg import Time
-
-    ns = round(t_s * 1e9)
-    return Time(sec=ns // 10**9, nanosec=ns % 10**9)
 
 
 def load_world(town: str, config: str | Path | None) -> tuple[Any, Conditions, tuple[Camera, ...]]:
@@ -134,7 +126,7 @@ class SimulatorNode(Node):
             self._publish_images()
             self.next_image_s += self.camera_period_s
         result = self.sim.step(self._control())
-        s, stamp = result.state, _stamp(result.state.time_s)
+        s, stamp = result.state, stamp_of(result.state.time_s)
         self.clock_pub.publish(Clock(clock=stamp))
         truth = Odometry(child_frame_id="base_link")
         truth.header.stamp, truth.header.frame_id = stamp, "map"
@@ -158,7 +150,7 @@ class SimulatorNode(Node):
             )
 
     def _publish_images(self) -> None:
-        stamp = _stamp(self.sim.state.time_s)
+        stamp = stamp_of(self.sim.state.time_s)
         for frame in self.sim.render(self.cameras):
             image_pub, info_pub = self.camera_pubs[frame.camera.name]
             info_pub.publish(info_from_camera(camera_model(frame.camera), stamp, frame.camera.name))
