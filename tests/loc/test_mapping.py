@@ -74,6 +74,17 @@ def test_maps_are_keyed_by_gallery_method_and_configuration(gallery, tmp_path):
     assert a != default_map_dir(tmp_path, gallery, "sift", sift, MappingConfig(num_pairs=10))
 
 
+def test_changing_a_presets_arguments_rekeys_its_maps(gallery, tmp_path, monkeypatch):
+    from vlocbench.loc import registry
+    from vlocbench.loc.mapping import MappingConfig, default_map_dir
+
+    sift = method_conf("sift")
+    before = default_map_dir(tmp_path, gallery, "sift", sift, MappingConfig())
+    target, kwargs = registry.FEATURES["sift"]
+    monkeypatch.setitem(registry.FEATURES, "sift", (target, {**kwargs, "contrast_threshold": 0.04}))
+    assert default_map_dir(tmp_path, gallery, "sift", sift, MappingConfig()) != before
+
+
 def test_a_map_build_killed_mid_write_is_finished_by_a_rerun(gallery, tmp_path):
     from vlocbench.loc.mapping import build_map
     from vlocbench.loc.registry import method_conf

@@ -32,7 +32,13 @@ from vlocbench.errors import LocalizationError
 from vlocbench.geometry import invert_pose
 from vlocbench.loc.features import Features
 from vlocbench.loc.gallery import CameraModel, Gallery
-from vlocbench.loc.registry import MethodConf, build_features, build_matcher, build_retrieval
+from vlocbench.loc.registry import (
+    MethodConf,
+    build_features,
+    build_matcher,
+    build_retrieval,
+    stage_params,
+)
 from vlocbench.loc.retrieval import nearest_poses, top_k
 
 MAP_FILE = "map.json"
@@ -64,8 +70,10 @@ class MapReport:
 
 def default_map_dir(root: str | Path, gallery: Gallery, method: str, conf: MethodConf,
                     mapping: MappingConfig) -> Path:  # fmt: skip
-    """``root/GALLERY-ID/METHOD-HASH``: one folder per (gallery, method, configuration)."""
-    return Path(root) / gallery.identity / f"{method}-{config_hash((conf, mapping), 8)}"
+    """``root/GALLERY-ID/METHOD-HASH``: one folder per (gallery, method, configuration), the
+    configuration including the arguments of the method's presets."""
+    key = (conf, mapping, stage_params(conf))
+    return Path(root) / gallery.identity / f"{method}-{config_hash(key, 8)}"
 
 
 # -- HDF5 caches ---------------------------------------------------------------------------------

@@ -20,7 +20,11 @@ from vlocbench.loc.retrieval import GlobalDescriptor
 POSE_PRIOR = "pose-prior"  # retrieval by the prior pose: no global descriptor
 
 FEATURES: dict[str, tuple[str, dict[str, Any]]] = {
-    "sift": ("vlocbench.loc.features:SiftExtractor", {"max_keypoints": 2048}),
+    # hloc's DoG (the paper's SIFT): peak threshold 0.01, i.e. OpenCV's contrast threshold 0.03
+    "sift": (
+        "vlocbench.loc.features:SiftExtractor",
+        {"max_keypoints": 2048, "contrast_threshold": 0.03},
+    ),
     "orb-teblid": ("vlocbench.loc.features:OrbTeblidExtractor", {"max_keypoints": 2048}),
     "aliked": ("vlocbench.loc.learned:AlikedExtractor", {"max_keypoints": 1024}),
     "disk": ("vlocbench.loc.learned:DiskExtractor", {"max_keypoints": 1024}),
@@ -62,6 +66,16 @@ METHODS: dict[str, MethodConf] = {
     "disk-lightglue": MethodConf("disk", "lightglue-disk", "effnet-gem"),
     "xfeat-lighterglue": MethodConf("xfeat", "lighterglue-xfeat", "effnet-gem"),
 }
+
+
+def stage_params(conf: MethodConf) -> dict[str, Any]:
+    """What builds each stage of ``conf``: a preset's class and arguments, or a plugin's dotted
+    path. Maps and episodes are keyed by it, so that changing a preset's arguments rebuilds them."""
+    stages = (("features", FEATURES), ("matcher", MATCHERS), ("retrieval", RETRIEVAL))
+    return {
+        stage: list(presets.get(getattr(conf, stage), (getattr(conf, stage), {})))
+        for stage, presets in stages
+    }
 
 
 def method_conf(name: str) -> MethodConf:
