@@ -19,6 +19,7 @@ import statistics
 import subprocess
 import sys
 import time
+from collections.abc import Iterable
 from pathlib import Path
 
 from vlocbench.ros.environment import local_only
@@ -41,6 +42,7 @@ def main() -> None:
 
     import rclpy
     from builtin_interfaces.msg import Time
+    from diagnostic_msgs.msg import DiagnosticArray
     from geometry_msgs.msg import PoseWithCovarianceStamped
     from rclpy.node import Node
     from sensor_msgs.msg import Image
@@ -63,30 +65,52 @@ def main() -> None:
     got: list[float] = []
     probe.create_subscription(PoseWithCovarianceStamped, "visual_pose_estimate",
                               lambda m: got.append(time.perf_counter()), 10)  # fmt: skip
+    status: list[dict[str, float]] = []  # the node's own times (s), from its diagnostics
+
+    def on_status(msg: DiagnosticArray) -> None:
+        values = {v.key: v.value for v in msg.status[0].values}
+        if "computation_time_s" in values:
+            status.append({k: float(v) for k, v in values.items() if k.endswith("_s")})
+
+    probe.create_subscription(DiagnosticArray, "diagnostics", on_status, 10)
     pub = probe.create_publisher(Image, "image", 10)
     while pub.get_subscription_count() == 0:
         rclpy.spin_once(probe, timeout_sec=0.1)
-    # alternating, so that whatever else loads the machine weighs on both alike
-    in_process, round_trip = [], []
+    # per image, in process and then through the node: the pair sees the same machine state
+    here: list[dict[str, float]] = []  # stage -> s, "total" -> s
+    there: list[dict[str, float]] = []  # the node's stage times, "round_trip" -> s
     for k, image in enumerate([images[0], *images]):  # the first is a warm-up
         t = time.perf_counter()
-        localizer.localize(image, camera)
-        in_process.append(time.perf_counter() - t)
-        msg = msg_from_image(image, Time(sec=k + 1), "camera")
+        seconds = localizer.localize(image, camera).seconds
+        here.append({**seconds, "total": time.perf_counter() - t})
         got.clear()
+        status.clear()
         t = time.perf_counter()
-        pub.publish(msg)
-        while not got and time.perf_counter() - t < 30:
+        pub.publish(msg_from_image(image, Time(sec=k + 1), "camera"))
+        while not (got and status) and time.perf_counter() - t < 30:
             rclpy.spin_once(probe, timeout_sec=0.005)
-        if k and got:
-            round_trip.append(got[0] - t)
+        if not got:
+            sys.exit(f"image {k}: no pose from the node within 30 s")
+        there.append({**status[0], "round_trip": got[0] - t})
     node_proc.send_signal(signal.SIGINT)
     node_proc.wait(timeout=30)
     probe.destroy_node()
     rclpy.shutdown()
-    a, b = statistics.median(in_process[1:]), statistics.median(round_trip)
-    print(f"in process: {1000 * a:.0f} ms; through the node at {args.rate:g} Hz: {1000 * b:.0f} ms "
-          f"(median of {len(round_trip)}); overhead {1000 * (b - a):.0f} ms")  # fmt: skip
+    here, there = here[1:], there[1:]
+
+    def ms(values: Iterable[float]) -> str:
+        return f"{1000 * statistics.median(values):.0f} ms"
+
+    print(f"SIFT, 800x600, node at {args.rate:g} Hz, medians of {len(here)} images:")
+    print(f"  in process {ms(h['total'] for h in here)}; image to pose through the node "
+          f"{ms(t['round_trip'] for t in there)}, of which localizing "
+          f"{ms(t['computation_time_s'] for t in there)}")  # fmt: skip
+    print(f"  overhead, per image: {ms(t['round_trip'] - h['total'] for h, t in zip(here, there))}"
+          f"; transport and the timer's wait alone: "
+          f"{ms(t['round_trip'] - t['computation_time_s'] for t in there)}")  # fmt: skip
+    for stage in [s for s in here[0] if s != "total"]:
+        print(f"  {stage}: {ms(h[stage] for h in here)} in process, "
+              f"{ms(t[f'{stage}_s'] for t in there)} in the node")  # fmt: skip
 
 
 def sim_speed(town: str, repeats: int) -> None:

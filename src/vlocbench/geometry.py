@@ -67,6 +67,25 @@ def pose_error(true_world_from_a: Array, est_world_from_a: Array) -> tuple[float
     return position, float(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
 
 
+def skew(v: Array) -> Array:
+    """(3, 3) cross-product matrix of a 3-vector: ``skew(a) @ b == np.cross(a, b)``."""
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def covariance_through_offset(world_from_a_covariance: Array, world_from_a: Array,
+                              a_from_b: Array) -> Array:  # fmt: skip
+    """The (6, 6) covariance of ``world_from_b = world_from_a @ a_from_b`` for a fixed ``a_from_b``.
+
+    Both covariances are over (position x, y, z in the world, m; rotation vector of a small
+    rotation applied on the world side, rad), the convention of ROS pose covariances near level.
+    The rotation error moves b's origin by its lever arm ``world_from_a[:3, :3] @ a_from_b[:3, 3]``.
+    """
+    lever_m = world_from_a[:3, :3] @ a_from_b[:3, 3]
+    jacobian = np.eye(6)
+    jacobian[:3, 3:] = -skew(lever_m)
+    return jacobian @ world_from_a_covariance @ jacobian.T
+
+
 def wrap_angle(angle_rad: float | Array) -> float | Array:
     """Wrap to [-pi, pi)."""
     return (np.asarray(angle_rad) + np.pi) % (2 * np.pi) - np.pi

@@ -181,3 +181,40 @@ def test_a_rig_is_localized_by_one_generalized_pnp(sim, stretch, sift_map):
     assert not blind.success and "camera 0: only 0 features" in blind.reason
     with pytest.raises(LocalizationError, match="one image, camera and mounting per camera"):
         localizer.localize_rig([black], models, mounts)
+
+
+def test_the_pnp_covariance_in_the_world_frame_matches_the_spread_of_noisy_answers():
+    """Monte Carlo: PnP on 1 px noisy projections of known points; the spread of the answers'
+    camera centres and world-side rotations has the shape of ``world_covariance``'s prediction
+    (pycolmap's robust loss makes it about 1.5x conservative, the same factor everywhere)."""
+    import cv2
+    import pycolmap
+
+    from vlocbench.geometry import invert_pose, make_pose, rpy_to_matrix
+    from vlocbench.loc.localizer import world_covariance
+    from vlocbench.loc.mapping import pose_of
+
+    rng = np.random.default_rng(0)
+    cam = pycolmap.Camera(model="PINHOLE", width=800, height=600, params=[400, 400, 400, 300])
+    cam_from_world = make_pose(rpy_to_matrix(0.1, -0.3, 1.2), np.array([4.0, -1.0, 20.0]))
+    points_cam = rng.uniform([-10, -5, 5], [10, 5, 30], (60, 3))
+    points_world = (invert_pose(cam_from_world) @ np.c_[points_cam, np.ones(60)].T).T[:, :3]
+    pixels = points_cam[:, :2] / points_cam[:, 2:] * 400 + [400, 300]
+    true_world_from_cam = invert_pose(cam_from_world)
+    errors, predicted = [], []
+    for _ in range(300):
+        answer = pycolmap.estimate_and_refine_absolute_pose(
+            pixels + rng.normal(0, 1.0, pixels.shape), points_world, cam, return_covariance=True
+        )
+        estimate = pose_of(answer["cam_from_world"])
+        world_from_cam = invert_pose(estimate)
+        rotation = cv2.Rodrigues(world_from_cam[:3, :3] @ true_world_from_cam[:3, :3].T)[0]
+        errors.append(np.r_[world_from_cam[:3, 3] - true_world_from_cam[:3, 3], rotation.ravel()])
+        predicted.append(world_covariance(estimate, answer["covariance"]))
+    model = np.mean(predicted, axis=0)
+    unit = 1.0 / np.sqrt(np.diag(model))  # compare in standard deviations: metres and radians alike
+    sample = np.cov(np.array(errors).T) * np.outer(unit, unit)
+    model = model * np.outer(unit, unit)
+    scale = np.sum(sample * model) / np.sum(model * model)
+    assert 0.4 < scale < 1.0
+    assert np.linalg.norm(sample - scale * model) < 0.15 * np.linalg.norm(scale * model)

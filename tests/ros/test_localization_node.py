@@ -11,6 +11,7 @@ from sensor_msgs.msg import CameraInfo, Image
 from tests.conftest import CAMERA
 from tests.ros.conftest import spin_until
 from vlocbench.bench.visual import camera_model
+from vlocbench.errors import UnknownNameError
 from vlocbench.geometry import pose_error
 from vlocbench.ros.localization_node import LocalizationNode
 from vlocbench.ros.messages import info_from_camera, msg_from_image, pose_from_msg
@@ -65,12 +66,27 @@ def test_an_image_comes_back_as_the_vehicle_pose(ros_context, sift_map, query):
     assert pose.header.frame_id == "map" and pose.header.stamp == stamp  # the image's time
     position_m, rotation_deg = pose_error(world_from_vehicle, pose_from_msg(pose.pose.pose))
     assert position_m <= 0.25 and rotation_deg <= 2.0
-    assert np.allclose(np.reshape(pose.pose.covariance, (6, 6)), np.eye(6) * 0.1)  # the paper's
+    covariance = np.reshape(pose.pose.covariance, (6, 6))  # the PnP's, for 1 px of noise
+    assert np.allclose(covariance, covariance.T) and np.all(np.linalg.eigvalsh(covariance) > 0)
+    assert 1e-3 < np.sqrt(covariance[0, 0]) < 0.5 and np.sqrt(covariance[5, 5]) < np.radians(2)
     spin_until(executor, lambda: tester.statuses)
     status = tester.values(tester.statuses[-1])
     assert status["state"] == "localized" and int(status["inliers"]) >= 20
     assert float(status["computation_time_s"]) > 0
     node.destroy_node()
+
+
+def test_the_papers_fixed_covariance_is_an_option(ros_context, sift_map, query):
+    image, _ = query
+    node, tester, executor = _nodes(
+        ros_context, sift_map[0], localization_frequence=10.0, covariance="fixed"
+    )
+    tester.image_pub.publish(msg_from_image(image, Time(sec=1), "camera"))
+    spin_until(executor, lambda: tester.poses)
+    assert np.allclose(np.reshape(tester.poses[0].pose.covariance, (6, 6)), np.eye(6) * 0.1)
+    node.destroy_node()
+    with pytest.raises(UnknownNameError, match="valid: estimate, fixed"):
+        _nodes(ros_context, sift_map[0], covariance="pnp")
 
 
 def test_bad_images_are_reported_and_the_node_lives_on(ros_context, sift_map, query):

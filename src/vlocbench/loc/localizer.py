@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 
 from vlocbench.config import ADDED_OPTION, require
 from vlocbench.errors import LocalizationError
-from vlocbench.geometry import invert_pose
+from vlocbench.geometry import invert_pose, skew
 from vlocbench.loc.features import Features, check_image
 from vlocbench.loc.gallery import CameraModel
 from vlocbench.loc.mapping import MAP_FILE, FeatureStore, colmap_camera, pose_of, rigid_of
@@ -88,10 +88,30 @@ class LocalizerConfig:
         return max(self.min_inliers, MIN_PNP_POINTS)
 
 
+def world_covariance(cam_from_world: NDArray[np.float64],
+                     cam_from_world_covariance: NDArray[np.float64]) -> NDArray[np.float64]:  # fmt: skip
+    """pycolmap's (6, 6) PnP covariance of ``cam_from_world`` (4, 4) as the covariance of
+    ``world_from_cam``: (position in the world, m; world-side rotation vector, rad).
+
+    pycolmap's is over (quaternion tangent, translation), the rotation perturbed on the left
+    (``R' = Exp(2 d) R``: Ceres's quaternion tangent is half the rotation angle) and the
+    translation added (``t' = t + v``). The camera centre ``c = -R^T t`` then moves by
+    ``-R^T [t]x w - R^T v`` and the world-side rotation of ``world_from_cam`` is ``-R^T w``.
+    """
+    rotation, translation = cam_from_world[:3, :3], cam_from_world[:3, 3]
+    jacobian = np.zeros((6, 6))  # (centre, world rotation) from (half-angle d, v)
+    jacobian[:3, :3] = -2.0 * rotation.T @ skew(translation)
+    jacobian[:3, 3:] = -rotation.T
+    jacobian[3:, :3] = -2.0 * rotation.T
+    return jacobian @ np.asarray(cam_from_world_covariance) @ jacobian.T
+
+
 @dataclass(frozen=True, kw_only=True)
 class QueryResult:
-    """``world_from_cam`` (4, 4) on success; ``cam_from_world_covariance`` (6, 6) from the PnP
-    refinement (rotation, translation); times per stage in seconds; ``reason`` on failure."""
+    """``world_from_cam`` (4, 4) on success; ``world_from_cam_covariance`` (6, 6) from the PnP
+    refinement for 1 px of image noise, over (camera position x, y, z in the world, m; rotation
+    vector of a small rotation on the world side, rad), see :func:`world_covariance`; times per
+    stage in seconds; ``reason`` on failure."""
 
     success: bool
     world_from_cam: NDArray[np.float64] | None = None
@@ -99,7 +119,7 @@ class QueryResult:
     num_correspondences: int = 0
     retrieved: tuple[str, ...] = ()
     cluster: tuple[str, ...] = ()
-    cam_from_world_covariance: NDArray[np.float64] | None = None
+    world_from_cam_covariance: NDArray[np.float64] | None = None
     seconds: dict[str, float] = field(default_factory=dict)
     reason: str = ""
     fallback: bool = False
@@ -267,15 +287,18 @@ class MapLocalizer:
                 else f"PnP found no pose from {n_corr} correspondences"
             )
             return self._failed(retrieved, seconds, reason, n_corr), best.corr
+        cam_from_world = pose_of(best.answer["cam_from_world"])
         covariance = best.answer.get("covariance")
         return QueryResult(
             success=True,
-            world_from_cam=invert_pose(pose_of(best.answer["cam_from_world"])),
+            world_from_cam=invert_pose(cam_from_world),
             num_inliers=best.inliers,
             num_correspondences=n_corr,
             retrieved=tuple(self.images[i].name for i in retrieved),
             cluster=tuple(self.images[i].name for i in best.cluster),
-            cam_from_world_covariance=None if covariance is None else np.asarray(covariance),
+            world_from_cam_covariance=(
+                None if covariance is None else world_covariance(cam_from_world, covariance)
+            ),
             seconds=seconds,
         ), best.corr  # fmt: skip
 

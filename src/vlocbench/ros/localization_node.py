@@ -6,8 +6,10 @@ paper's four file paths. The latest image is localized at ``localization_frequen
 ``use_sim_time`` works), and the answer is stamped with the image's time:
 
 - ``pose_publish_topic`` (``geometry_msgs/PoseWithCovarianceStamped``, frame ``map``): the pose of
-  ``base_frame`` (the camera's, when ``compensate_sensor_offset`` is false) on success, with the
-  paper's covariance (``pose_variance`` on the diagonal), ready for robot_localization's ``pose0``;
+  ``base_frame`` (the camera's, when ``compensate_sensor_offset`` is false) on success, ready for
+  robot_localization's ``pose0``, with the PnP's covariance for ``pixel_noise_px`` of image noise
+  (x, y, z, then the rotation about the map's axes, which is roll, pitch, yaw near level) or, with
+  ``covariance:=fixed``, the paper's (``pose_variance`` on the diagonal);
 - ``diagnostics`` (``diagnostic_msgs/DiagnosticArray``): after every attempt, the state, success,
   inliers, computation time and the reason of a failure, in place of the paper's custom messages
   (which cannot be built from pip);
@@ -37,8 +39,9 @@ from sensor_msgs.msg import CameraInfo
 from sensor_msgs.msg import Image as ImageMsg
 from visualization_msgs.msg import Marker, MarkerArray
 
+from vlocbench.config import require_one_of
 from vlocbench.errors import VlocbenchError
-from vlocbench.geometry import invert_pose
+from vlocbench.geometry import covariance_through_offset, invert_pose
 from vlocbench.loc.gallery import CameraModel, Gallery
 from vlocbench.loc.localizer import LocalizerConfig, MapLocalizer, QueryResult
 from vlocbench.loc.mapping import MAP_FILE
@@ -74,8 +77,11 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
         list(PAPER_SENSOR_OFFSET),
         "base_from_sensor: x, y, z m, roll, pitch, yaw deg",
     ),
-    "pose_variance": (0.1, "diagonal of the published covariance (the paper's fixed 0.1)"),
+    "covariance": ("estimate", "published covariance: estimate (the PnP's) or fixed (the paper's)"),
+    "pixel_noise_px": (1.0, "image noise the PnP's covariance assumes (covariance: estimate)"),
+    "pose_variance": (0.1, "diagonal of the covariance when fixed (the paper's 0.1)"),
 }
+COVARIANCES = ("estimate", "fixed")
 
 
 class LocalizationNode(Node):
@@ -87,6 +93,7 @@ class LocalizationNode(Node):
             self.declare_parameter(name, default, ParameterDescriptor(description=description))
         p = {name: self.get_parameter(name).value for name in PARAMETERS}
         self.params = p
+        require_one_of(p["covariance"], COVARIANCES, "covariance")
         self.base_from_sensor = Extrinsics(*map(float, p["sensor_offset"])).vehicle_from_cam()
         self.pose_pub = self.create_publisher(
             PoseWithCovarianceStamped, p["pose_publish_topic"], 10
@@ -166,9 +173,18 @@ class LocalizationNode(Node):
         seconds = time.perf_counter() - start
         if result.success and result.world_from_cam is not None:
             world_from_base = result.world_from_cam
-            if self.params["compensate_sensor_offset"]:
-                world_from_base = world_from_base @ invert_pose(self.base_from_sensor)
-            covariance = np.eye(6) * float(self.params["pose_variance"])
+            sensor_from_base = (
+                invert_pose(self.base_from_sensor)
+                if self.params["compensate_sensor_offset"]
+                else np.eye(4)
+            )
+            world_from_base = world_from_base @ sensor_from_base
+            if self.params["covariance"] == "fixed" or result.world_from_cam_covariance is None:
+                covariance = np.eye(6) * float(self.params["pose_variance"])
+            else:
+                covariance = float(self.params["pixel_noise_px"]) ** 2 * covariance_through_offset(
+                    result.world_from_cam_covariance, result.world_from_cam, sensor_from_base
+                )
             self.pose_pub.publish(
                 pose_with_covariance(world_from_base, covariance, msg.header.stamp)
             )
@@ -179,6 +195,7 @@ class LocalizationNode(Node):
             inliers=result.num_inliers,
             computation_time_s=seconds,
             stamp=stamp,
+            **{f"{stage}_s": round(s, 6) for stage, s in result.seconds.items()},
         )
         if self.marker_pub is not None:
             self.marker_pub.publish(self._markers(result, msg))
