@@ -47,7 +47,7 @@ def test_gallery_build_map_and_localize(tmp_path, capsys):
     spec.write_text(yaml.safe_dump(to_dict(small_spec())))
     gallery, maps = tmp_path / "gallery", tmp_path / "map"
     args = ["--width", "320", "--height", "240", "--spacing", "4"]
-    assert main(["gallery", str(spec), "--out", str(gallery), *args]) == 0
+    assert main(["gallery", "capture", str(spec), "--out", str(gallery), *args]) == 0
     assert "wrote" in capsys.readouterr().out
     assert main(["build-map", str(gallery), "--method", "sift-vlad", "--out", str(maps)]) == 0
     assert "points, mean track length" in capsys.readouterr().out

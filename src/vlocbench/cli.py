@@ -201,6 +201,12 @@ def _missing_ros_extra(exc: ImportError) -> VlocbenchError:
 
 
 def _export(args: argparse.Namespace) -> int:
+    if args.format:
+        from vlocbench.bench.export import EXPORT_DIR, export_run
+
+        written = export_run(args.output, args.format)
+        print(f"wrote {len(written)} files to {args.output / EXPORT_DIR / args.format}")
+        return 0
     try:
         from vlocbench.ros.bags import export_bags
     except ImportError as exc:
@@ -249,6 +255,25 @@ def _gallery(args: argparse.Namespace) -> int:
             sim, plan_town_route(town), (camera,), out, spacing_m=args.spacing, speed_mps=args.speed
         )
     print(f"wrote {len(gallery)} images with their poses to {out}")
+    return 0
+
+
+def _gallery_import(args: argparse.Namespace) -> int:
+    from vlocbench.loc.mapping import import_colmap
+
+    gallery = import_colmap(args.model, args.images, args.out)
+    print(f"wrote a gallery of {len(gallery)} images with their poses to {args.out}")
+    return 0
+
+
+def _gallery_export(args: argparse.Namespace) -> int:
+    from vlocbench.loc.gallery import Gallery
+    from vlocbench.loc.mapping import export_colmap
+
+    gallery = Gallery.load(args.gallery)
+    export_colmap(gallery, args.out)
+    print(f"wrote the COLMAP model of {len(gallery)} images to {args.out} "
+          f"(images in {gallery.root / 'images'})")  # fmt: skip
     return 0
 
 
@@ -393,12 +418,23 @@ def _add_drive_verb(sub: Any, shared: dict[str, argparse.ArgumentParser]) -> Non
 
 
 def _add_map_verbs(sub: Any, shared: dict[str, argparse.ArgumentParser]) -> None:
-    p = sub.add_parser("gallery", parents=[shared["town"], shared["camera"], shared["k"]],
-                       help="drive a town's route and save gallery images with poses")  # fmt: skip
-    p.add_argument("--out", type=Path, help="gallery folder (default: galleries/TOWN-kK)")
-    p.add_argument("--spacing", type=float, default=2.0, help="metres between images")
-    p.add_argument("--speed", type=float, default=8.0, help="driving speed, m/s")
-    p.set_defaults(func=_gallery)
+    p = sub.add_parser("gallery", help="galleries: capture one in a town, or take one from COLMAP")
+    verbs = p.add_subparsers(dest="gallery_command", required=True, metavar="VERB")
+    q = verbs.add_parser("capture", parents=[shared["town"], shared["camera"], shared["k"]],
+                         help="drive a town's route and save gallery images with poses")  # fmt: skip
+    q.add_argument("--out", type=Path, help="gallery folder (default: galleries/TOWN-kK)")
+    q.add_argument("--spacing", type=float, default=2.0, help="metres between images")
+    q.add_argument("--speed", type=float, default=8.0, help="driving speed, m/s")
+    q.set_defaults(func=_gallery)
+    q = verbs.add_parser("import", help="a gallery from a COLMAP model with images (any posed set)")
+    q.add_argument("model", type=Path, help="COLMAP model folder (cameras, images; text or binary)")
+    q.add_argument("images", type=Path, help="folder the model's image names are relative to")
+    q.add_argument("--out", type=Path, required=True, help="the new gallery folder")
+    q.set_defaults(func=_gallery_import)
+    q = verbs.add_parser("export", help="a gallery as a COLMAP model with its poses and no points")
+    q.add_argument("gallery", type=Path, help="gallery folder")
+    q.add_argument("--out", type=Path, required=True, help="model folder (COLMAP text format)")
+    q.set_defaults(func=_gallery_export)
 
     p = sub.add_parser("build-map", help="features, matches and triangulation of a gallery")
     p.add_argument("gallery", type=Path, help="gallery folder (see `vlocbench gallery`)")
@@ -501,10 +537,13 @@ def _add_experiment_verbs(sub: Any, shared: dict[str, argparse.ArgumentParser]) 
     p.add_argument("--no-report", action="store_true", help="skip the report")
     p.set_defaults(func=_run)
 
-    p = sub.add_parser("export", help="a run's episodes in other formats (rosbag2)")
+    p = sub.add_parser("export", help="a run's episodes for evo, hloc, COLMAP or ROS 2 tools")
     p.add_argument("output", type=Path, help="the experiment's output folder")
-    p.add_argument("--rosbag", action="store_true", required=True,
-                   help="each episode as a rosbag2 (MCAP) folder in OUTPUT/bags (needs the ros extra)")  # fmt: skip
+    how = p.add_mutually_exclusive_group(required=True)
+    how.add_argument("--format", help="tum, kitti (trajectories), hloc (recall drives' results), "
+                     "colmap (the galleries as posed models): in OUTPUT/export/FORMAT")  # fmt: skip
+    how.add_argument("--rosbag", action="store_true",
+                     help="each episode as a rosbag2 (MCAP) folder in OUTPUT/bags (needs the ros extra)")  # fmt: skip
     p.set_defaults(func=_export)
 
     p = sub.add_parser("report", parents=[shared["report"]],

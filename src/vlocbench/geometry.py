@@ -67,6 +67,42 @@ def pose_error(true_world_from_a: Array, est_world_from_a: Array) -> tuple[float
     return position, float(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
 
 
+def quaternion_from_rotation(R: Array) -> tuple[float, float, float, float]:
+    """(x, y, z, w) of a rotation matrix (w >= 0)."""
+    w = np.sqrt(max(0.0, 1.0 + R[0, 0] + R[1, 1] + R[2, 2])) / 2
+    x = np.sqrt(max(0.0, 1.0 + R[0, 0] - R[1, 1] - R[2, 2])) / 2
+    y = np.sqrt(max(0.0, 1.0 - R[0, 0] + R[1, 1] - R[2, 2])) / 2
+    z = np.sqrt(max(0.0, 1.0 - R[0, 0] - R[1, 1] + R[2, 2])) / 2
+    x = float(np.copysign(x, R[2, 1] - R[1, 2]))
+    y = float(np.copysign(y, R[0, 2] - R[2, 0]))
+    z = float(np.copysign(z, R[1, 0] - R[0, 1]))
+    q = np.array([x, y, z, w])
+    return tuple(float(v) for v in q / np.linalg.norm(q))  # type: ignore[return-value]
+
+
+def rotation_from_quaternion(x: float, y: float, z: float, w: float) -> Array:
+    """The rotation matrix of a quaternion (x, y, z, w), normalized first."""
+    q = np.array([x, y, z, w], np.float64)
+    x, y, z, w = q / np.linalg.norm(q)
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def rpy_of(rotation: Array) -> tuple[float, float, float]:
+    """(roll, pitch, yaw) in rad of a rotation matrix, the inverse of :func:`rpy_to_matrix`."""
+    pitch = float(np.arcsin(np.clip(-rotation[2, 0], -1.0, 1.0)))
+    return (
+        float(np.arctan2(rotation[2, 1], rotation[2, 2])),
+        pitch,
+        float(np.arctan2(rotation[1, 0], rotation[0, 0])),
+    )
+
+
 def skew(v: Array) -> Array:
     """(3, 3) cross-product matrix of a 3-vector: ``skew(a) @ b == np.cross(a, b)``."""
     return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])

@@ -96,3 +96,49 @@ def test_a_map_build_killed_mid_write_is_finished_by_a_rerun(gallery, tmp_path):
             (out / cache).write_bytes(b"\x89HDF\r\n\x1a\n" + b"\0" * 64)
     again = build_map(gallery, method_conf("sift-vlad"), out)
     assert again.points == first.points and again.images == first.images
+
+
+def test_a_gallery_goes_to_colmap_and_back_unchanged(gallery, tmp_path):
+    import pycolmap
+
+    from vlocbench.cli import main
+    from vlocbench.loc.gallery import Gallery
+
+    model = tmp_path / "model"
+    assert main(["gallery", "export", str(gallery.root), "--out", str(model)]) == 0
+    rec = pycolmap.Reconstruction(model)  # COLMAP reads it: posed images, no points
+    assert rec.num_reg_images() == len(gallery) and rec.num_points3D() == 0
+    back = tmp_path / "back"
+    assert (
+        main(["gallery", "import", str(model), str(gallery.root / "images"), "--out", str(back)])
+        == 0
+    )
+    again = Gallery.load(back)
+    assert again.names == gallery.names
+    [cam], [cam_back] = gallery.cameras.values(), again.cameras.values()
+    assert (cam_back.width, cam_back.height) == (cam.width, cam.height)
+    assert np.allclose(cam_back.K, cam.K)  # COLMAP's +0.5 pixel centres undone
+    for a, b in zip(gallery.images, again.images, strict=True):
+        assert np.allclose(a.world_from_cam, b.world_from_cam, atol=1e-9)
+    first = gallery.names[0]
+    assert (back / "images" / first).read_bytes() == (gallery.root / "images" / first).read_bytes()
+
+
+def test_a_colmap_model_a_gallery_cannot_take_is_a_clear_error(gallery, tmp_path):
+    import pycolmap
+
+    from vlocbench.loc.mapping import export_colmap, import_colmap
+
+    model = export_colmap(gallery, tmp_path / "model")
+    rec = pycolmap.Reconstruction(model)
+    camera = next(iter(rec.cameras.values()))
+    rec.cameras[camera.camera_id] = pycolmap.Camera(
+        model="SIMPLE_RADIAL", width=camera.width, height=camera.height,
+        params=[camera.params[0], camera.params[2], camera.params[3], 0.01],
+        camera_id=camera.camera_id,
+    )  # fmt: skip
+    rec.write_text(model)
+    with pytest.raises(LocalizationError, match="is SIMPLE_RADIAL; a gallery takes PINHOLE"):
+        import_colmap(model, gallery.root / "images", tmp_path / "out")
+    with pytest.raises(LocalizationError, match="is not a COLMAP model"):
+        import_colmap(tmp_path / "nothing", gallery.root / "images", tmp_path / "out")

@@ -32,7 +32,7 @@ from vlocbench.bench.records import (
     Trajectory,
 )
 from vlocbench.config import config_hash, require, require_one_of
-from vlocbench.geometry import planar_pose, pose_error, wrap_angle
+from vlocbench.geometry import planar_pose, pose_error, rpy_of, wrap_angle
 from vlocbench.interfaces import Array
 from vlocbench.nav import (
     ControllerConfig,
@@ -147,11 +147,14 @@ def _record(p: _InFlight, fused: bool | None) -> LocalizationRecord:
     tx, ty, tyaw = planar_of(p.truth)
     if e.success and e.world_from_vehicle is not None:
         x, y, yaw = planar_of(e.world_from_vehicle)
+        z = float(e.world_from_vehicle[2, 3])
+        roll, pitch, _ = rpy_of(e.world_from_vehicle[:3, :3])
         pos_err = float(np.hypot(x - tx, y - ty))
         yaw_err = float(np.degrees(abs(wrap_angle(yaw - tyaw))))
         pos_err_3d, rot_err = pose_error(p.truth, e.world_from_vehicle)
     else:
-        x = y = yaw = pos_err = yaw_err = pos_err_3d = rot_err = float("nan")
+        x = y = z = yaw = roll = pitch = float("nan")
+        pos_err = yaw_err = pos_err_3d = rot_err = float("nan")
     ex, ey, eyaw = p.ekf
     return LocalizationRecord(
         time_s=p.time_s,
@@ -159,6 +162,9 @@ def _record(p: _InFlight, fused: bool | None) -> LocalizationRecord:
         x_m=x,
         y_m=y,
         yaw_rad=yaw,
+        z_m=z,
+        roll_rad=roll,
+        pitch_rad=pitch,
         true_x_m=tx,
         true_y_m=ty,
         true_yaw_rad=tyaw,

@@ -22,7 +22,8 @@ class LocalizationRecord:
     Errors are NaN when the call failed. ``position_error_m`` / ``yaw_error_deg``: planar (x, y,
     yaw); ``position_error_3d_m`` / ``rotation_error_deg``: 6-DoF, the 3D distance and the full
     rotation angle between the true and estimated vehicle (so camera) orientation, as the paper's
-    evaluator measures them. ``ekf_*``: the filter's estimate at the image time (before this
+    evaluator measures them. ``z_m``, ``roll_rad``, ``pitch_rad`` complete the estimate to 6-DoF
+    (the car drives on flat ground, so the truth's are 0). ``ekf_*``: the filter's estimate at the image time (before this
     estimate was fused). ``fused``: True/False once the EKF accepted/rejected it, None when it was
     never offered (failure, or a re-initialization came first).
     """
@@ -32,6 +33,9 @@ class LocalizationRecord:
     x_m: float
     y_m: float
     yaw_rad: float
+    z_m: float
+    roll_rad: float
+    pitch_rad: float
     true_x_m: float
     true_y_m: float
     true_yaw_rad: float

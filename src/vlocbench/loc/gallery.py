@@ -15,6 +15,7 @@ in the world frame (metres).
 from __future__ import annotations
 
 import json
+import shutil
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -141,13 +142,34 @@ class GalleryWriter:
         camera: CameraModel,
         world_from_cam: Array,
     ) -> None:
+        path = self._image_path(name, camera_name, camera, world_from_cam)
+        cv2.imwrite(str(path), np.ascontiguousarray(image[:, :, ::-1]))
+
+    def add_file(self, name: str, source: Path, camera_name: str, camera: CameraModel,
+                 world_from_cam: Array) -> None:  # fmt: skip
+        """Add the image file ``source`` as it is (no re-encoding), once its size is checked."""
+        image = cv2.imread(str(source), cv2.IMREAD_UNCHANGED)
+        if image is None:
+            raise LocalizationError(f"{source} is not a readable image")
+        if image.shape[:2] != (camera.height, camera.width):
+            raise LocalizationError(
+                f"{source} is {image.shape[1]}x{image.shape[0]}, its camera "
+                f"{camera.width}x{camera.height}"
+            )
+        shutil.copyfile(source, self._image_path(name, camera_name, camera, world_from_cam))
+
+    def _image_path(self, name: str, camera_name: str, camera: CameraModel,
+                    world_from_cam: Array) -> Path:  # fmt: skip
+        """Record the image; where its file goes (folders in its name are made)."""
         known = self.cameras.setdefault(camera_name, camera)
         if known.width != camera.width or not np.allclose(known.K, camera.K):
             raise LocalizationError(f"camera {camera_name!r} changed its calibration")
-        cv2.imwrite(str(self.root / IMAGE_DIR / name), np.ascontiguousarray(image[:, :, ::-1]))
         self.images.append(
             GalleryImage(name, camera_name, np.asarray(world_from_cam, dtype=np.float64))
         )
+        path = self.root / IMAGE_DIR / name
+        path.parent.mkdir(parents=True, exist_ok=True)
+        return path
 
     def close(self) -> Gallery:
         data = {

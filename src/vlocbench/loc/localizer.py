@@ -9,7 +9,6 @@ fall-back to the retrieved image's pose (``fallback_to_retrieval`` makes that ex
 
 from __future__ import annotations
 
-import json
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -24,9 +23,8 @@ from vlocbench.errors import LocalizationError
 from vlocbench.geometry import invert_pose, skew
 from vlocbench.loc.features import Features, check_image
 from vlocbench.loc.gallery import CameraModel
-from vlocbench.loc.mapping import MAP_FILE, FeatureStore, colmap_camera, pose_of, rigid_of
+from vlocbench.loc.mapping import FeatureStore, colmap_camera, map_info, pose_of, rigid_of
 from vlocbench.loc.registry import (
-    MethodConf,
     build_features,
     build_matcher,
     build_retrieval,
@@ -174,15 +172,7 @@ class MapLocalizer:
     def __init__(self, map_dir: str | Path, config: LocalizerConfig | None = None) -> None:
         self.map_dir = Path(map_dir)
         self.config = config or LocalizerConfig()
-        info_path = self.map_dir / MAP_FILE
-        if not info_path.is_file():
-            raise LocalizationError(f"{self.map_dir} is not a map: {MAP_FILE} is missing")
-        try:
-            info = json.loads(info_path.read_text())
-            self.method = MethodConf(**info["method"])
-            self.gallery_dir = Path(info["gallery"])  # the gallery the map was built from
-        except (json.JSONDecodeError, KeyError, TypeError) as exc:
-            raise LocalizationError(f"{info_path} is corrupt: {exc!r}") from None
+        self.method, self.gallery_dir = map_info(self.map_dir)  # what the map was built with
         try:
             rec = pycolmap.Reconstruction(self.map_dir / "sfm")
         except Exception as exc:  # pycolmap raises plain exceptions for unreadable models

@@ -31,7 +31,7 @@ from vlocbench.config import config_hash, require
 from vlocbench.errors import LocalizationError
 from vlocbench.geometry import invert_pose
 from vlocbench.loc.features import Features
-from vlocbench.loc.gallery import CameraModel, Gallery
+from vlocbench.loc.gallery import CameraModel, Gallery, GalleryWriter
 from vlocbench.loc.registry import (
     MethodConf,
     build_features,
@@ -264,17 +264,89 @@ def _match(gallery: Gallery, conf: MethodConf, mapping: MappingConfig, features:
     return out
 
 
-def _triangulate(gallery: Gallery, mapping: MappingConfig, features: FeatureStore,
-                 matches: dict[tuple[str, str], np.ndarray], out: Path) -> pycolmap.Reconstruction:  # fmt: skip
+def posed_model(gallery: Gallery) -> pycolmap.Reconstruction:
+    """The gallery as a COLMAP model with known poses and no points: camera k + 1 is the
+    gallery's k-th camera (PINHOLE, COLMAP's pixel centres), image k + 1 its k-th image. What
+    hloc's triangulation (``triangulation.main(reference_model=...)``) starts from."""
     rec = pycolmap.Reconstruction()
     cam_ids = {name: k + 1 for k, name in enumerate(gallery.cameras)}
     for name, cam in gallery.cameras.items():
         rec.add_camera_with_trivial_rig(colmap_camera(cam, cam_ids[name]))
-    ids = {}
     for k, im in enumerate(gallery.images):
         image = pycolmap.Image(name=im.name, camera_id=cam_ids[im.camera], image_id=k + 1)
         rec.add_image_with_trivial_frame(image, rigid_of(invert_pose(im.world_from_cam)))
-        ids[im.name] = k + 1
+    return rec
+
+
+def map_info(map_dir: str | Path) -> tuple[MethodConf, Path]:
+    """(method, gallery folder) a map was built with, from its ``map.json``."""
+    path = Path(map_dir) / MAP_FILE
+    if not path.is_file():
+        raise LocalizationError(f"{map_dir} is not a map: {MAP_FILE} is missing")
+    try:
+        info = json.loads(path.read_text())
+        return MethodConf(**info["method"]), Path(info["gallery"])
+    except (json.JSONDecodeError, KeyError, TypeError) as exc:
+        raise LocalizationError(f"{path} is corrupt: {exc!r}") from None
+
+
+COLMAP_PINHOLES = ("PINHOLE", "SIMPLE_PINHOLE")  # the camera models a gallery can take
+
+
+def export_colmap(gallery: Gallery, out_dir: str | Path) -> Path:
+    """Write :func:`posed_model` as a COLMAP text model (cameras.txt, images.txt with empty point
+    lines, points3D.txt) in ``out_dir``; the images stay in ``gallery.root / "images"``."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    posed_model(gallery).write_text(out)
+    return out
+
+
+def import_colmap(model_dir: str | Path, image_dir: str | Path, out_dir: str | Path) -> Gallery:
+    """A gallery in ``out_dir`` from a COLMAP model (text or binary) and its images: every
+    registered image at its pose, copied as it is. Cameras must be undistorted pinholes
+    (PINHOLE or SIMPLE_PINHOLE; COLMAP's ``image_undistorter`` makes them so)."""
+    model_dir, image_dir = Path(model_dir), Path(image_dir)
+    try:
+        rec = pycolmap.Reconstruction(model_dir)
+    except Exception as exc:  # pycolmap raises bare ValueError/RuntimeError on bad folders
+        raise LocalizationError(f"{model_dir} is not a COLMAP model: {exc}") from None
+    cameras: dict[int, CameraModel] = {}
+    for cam_id, cam in rec.cameras.items():
+        model = cam.model.name
+        if model not in COLMAP_PINHOLES:
+            raise LocalizationError(
+                f"{model_dir}: camera {cam_id} is {model}; a gallery takes "
+                f"{', '.join(COLMAP_PINHOLES)} (undistort the images first)"
+            )
+        fx, fy, cx, cy = (
+            (cam.params[0], cam.params[0], *cam.params[1:3])
+            if model == "SIMPLE_PINHOLE"
+            else tuple(cam.params)
+        )
+        K = np.array([[fx, 0, cx - 0.5], [0, fy, cy - 0.5], [0, 0, 1]])  # OpenCV's pixel centres
+        cameras[cam_id] = CameraModel(int(cam.width), int(cam.height), K)
+    writer = GalleryWriter(out_dir)
+    for _, image in sorted(rec.images.items()):
+        if not image.has_pose:
+            continue
+        source = image_dir / image.name
+        if not source.is_file():
+            raise LocalizationError(f"{model_dir}: image {image.name!r} is not in {image_dir}")
+        writer.add_file(
+            image.name, source, f"camera{image.camera_id}", cameras[image.camera_id],
+            invert_pose(pose_of(image.cam_from_world())),
+        )  # fmt: skip
+    if not writer.images:
+        raise LocalizationError(f"{model_dir} has no registered images")
+    return writer.close()
+
+
+def _triangulate(gallery: Gallery, mapping: MappingConfig, features: FeatureStore,
+                 matches: dict[tuple[str, str], np.ndarray], out: Path) -> pycolmap.Reconstruction:  # fmt: skip
+    rec = posed_model(gallery)
+    cam_ids = {name: k + 1 for k, name in enumerate(gallery.cameras)}
+    ids = {im.name: k + 1 for k, im in enumerate(gallery.images)}
     db_path = out / "database.db"
     db_path.unlink(missing_ok=True)
     db = pycolmap.Database.open(db_path)

@@ -20,9 +20,9 @@ from rosbags.typesys import Stores, get_typestore
 
 from vlocbench.bench.store import read_episode_table, read_latest_run
 from vlocbench.config import from_dict
-from vlocbench.geometry import planar_pose
+from vlocbench.geometry import planar_pose, quaternion_from_rotation
 from vlocbench.nav import OdometryNoise
-from vlocbench.ros.messages import quaternion_from_rotation, sec_nanosec
+from vlocbench.ros.messages import sec_nanosec
 
 POSE_VARIANCE = 0.1  # the paper's localization node's fixed covariance
 _TS = get_typestore(Stores.ROS2_KILTED)

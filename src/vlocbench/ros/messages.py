@@ -11,7 +11,7 @@ from sensor_msgs.msg import Image as ImageMsg
 from std_msgs.msg import Header
 
 from vlocbench.errors import LocalizationError
-from vlocbench.geometry import make_pose
+from vlocbench.geometry import make_pose, quaternion_from_rotation, rotation_from_quaternion
 from vlocbench.interfaces import Array, Image
 from vlocbench.loc.gallery import CameraModel
 
@@ -83,31 +83,6 @@ def info_from_camera(camera: CameraModel, stamp: Time, frame_id: str) -> CameraI
         distortion_model="plumb_bob", d=[0.0] * 5, k=K.ravel().tolist(),
         r=np.eye(3).ravel().tolist(), p=P.ravel().tolist(),
     )  # fmt: skip
-
-
-def quaternion_from_rotation(R: Array) -> tuple[float, float, float, float]:
-    """(x, y, z, w) of a rotation matrix (w >= 0)."""
-    w = np.sqrt(max(0.0, 1.0 + R[0, 0] + R[1, 1] + R[2, 2])) / 2
-    x = np.sqrt(max(0.0, 1.0 + R[0, 0] - R[1, 1] - R[2, 2])) / 2
-    y = np.sqrt(max(0.0, 1.0 - R[0, 0] + R[1, 1] - R[2, 2])) / 2
-    z = np.sqrt(max(0.0, 1.0 - R[0, 0] - R[1, 1] + R[2, 2])) / 2
-    x = float(np.copysign(x, R[2, 1] - R[1, 2]))
-    y = float(np.copysign(y, R[0, 2] - R[2, 0]))
-    z = float(np.copysign(z, R[1, 0] - R[0, 1]))
-    q = np.array([x, y, z, w])
-    return tuple(float(v) for v in q / np.linalg.norm(q))  # type: ignore[return-value]
-
-
-def rotation_from_quaternion(x: float, y: float, z: float, w: float) -> Array:
-    q = np.array([x, y, z, w], np.float64)
-    x, y, z, w = q / np.linalg.norm(q)
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-        ]
-    )
 
 
 def pose_to_msg(world_from_base: Array) -> Pose:
