@@ -6,6 +6,7 @@ import pytest
 from tests.bench.fakes import synthetic_result
 from vlocbench.bench.metrics import (
     confident_wrong,
+    place_recall,
     drift_segments,
     episode_metrics,
     failure_rate,
@@ -96,3 +97,15 @@ def test_a_timed_out_episode_counts_a_failure_over_the_route_it_covered():
     assert late.failures == 2 and late.failures_per_km == pytest.approx(2 / 0.04)
     m = episode_metrics(late)
     assert not m.completed and m.failure_causes[-1] == "timeout" and m.route_covered_m == 40.0
+
+
+def test_place_recall_counts_a_retrieved_image_within_the_distance_among_the_first_n():
+    distances = [
+        [3.0, 30.0, 30.0, 30.0, 30.0, 30.0, 30.0, 30.0, 30.0, 30.0],  # right at once
+        [30.0, 30.0, 8.0, 30.0, 30.0, 30.0, 30.0, 30.0, 30.0, 2.0],  # 8 m third, 2 m tenth
+        [40.0] * 10,  # never
+        [],  # no ranking (not a retrieval method): not counted
+    ]
+    r = place_recall(distances)  # N-major: @1 (5, 10, 25 m), @5 (...), @10 (...)
+    assert r == pytest.approx([1 / 3, 1 / 3, 1 / 3, 1 / 3, 2 / 3, 2 / 3, 2 / 3, 2 / 3, 2 / 3])
+    assert all(np.isnan(place_recall([[], []])))

@@ -249,6 +249,7 @@ def test_experiment_runs_end_to_end_and_resumes(tiny):
     recall = [r for r in rows if r.kind == "recall"]
     assert len(recall) == 2 and all(r.metrics["queries"] > 10 for r in recall)
     assert all(r.metrics["recall"][3] > 0.5 for r in recall)  # it localizes on its own map
+    assert all(r.metrics["place_recall"][-1] > 0.9 for r in recall)  # Recall@10 within 25 m
     assert {r.config["setup"]["conditions"]["illumination"]["k"] for r in recall} == {0.0, 6.0}
     again = run_experiment(load_experiment(root / "tiny.yaml"), progress=False)
     assert (again.skipped, again.finished) == (5, 0)
@@ -275,6 +276,7 @@ def test_report_of_a_run(tiny):
     files = write_report(root / "out")
     md = files.markdown.read_text()
     assert "| sift-vlad |" in md and "| odometry only |" in md and "k=6" in md
+    assert "place recognition alone" in md and "| sift-vlad | 25 m |" in md
     assert "/km) |" in md  # the fused recall with the EKF's lock losses in the ground-truth drive
     assert r"\begin{tabular}" in files.latex.read_text()
     assert {p.name for p in files.figures} == {"failure_rate_small.png", "failure_sites_small.png",

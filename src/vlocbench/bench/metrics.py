@@ -29,6 +29,8 @@ RECALL_THRESHOLDS: tuple[tuple[float, float], ...] = (
 )
 HOTSPOT_BIN_M = 25.0  # failure sites closer than this along the route count as one place
 WRONG_THRESHOLD: tuple[float, float] = (5.0, 10.0)  # a returned pose beyond this is wrong
+PLACE_RANKS = (1, 5, 10)  # place recognition's Recall@N ...
+PLACE_RADII_M = (5.0, 10.0, 25.0)  # ... within these distances (the paper's evaluator's)
 DRIFT_MIN_SEGMENT_M = 10.0  # failure-free stretches shorter than this say nothing about drift
 
 
@@ -44,6 +46,22 @@ def recall(
     if len(pos) == 0:
         return tuple(float("nan") for _ in thresholds)
     return tuple(float(np.mean((pos <= m) & (yaw <= d))) for m, d in thresholds)
+
+
+def place_recall(
+    retrieval_distances_m: Sequence[Sequence[float]],
+    ranks: Sequence[int] = PLACE_RANKS,
+    radii_m: Sequence[float] = PLACE_RADII_M,
+) -> tuple[float, ...]:
+    """Retrieval alone: per (N, d), N-major, the fraction of queries with one of the first N
+    retrieved images within d metres (each query's distances best first). Queries without a
+    ranking do not count; NaN for every pair when none has one."""
+    ranked = [np.asarray(d, np.float64) for d in retrieval_distances_m if len(d)]
+    if not ranked:
+        return tuple(float("nan") for _ in ranks for _ in radii_m)
+    return tuple(
+        float(np.mean([np.min(d[:n]) <= r for d in ranked])) for n in ranks for r in radii_m
+    )
 
 
 def confident_wrong(
@@ -131,6 +149,7 @@ class EpisodeMetrics:
     recall: tuple[float, ...]  # raw localization, 6-DoF errors, at RECALL_THRESHOLDS
     recall_planar: tuple[float, ...]  # the same on planar (x, y, yaw) errors
     confident_wrong: float  # share of queries answered beyond WRONG_THRESHOLD (6-DoF)
+    place_recall: tuple[float, ...]  # retrieval alone, Recall@N within d m (PLACE_RANKS x RADII)
     recall_ekf: tuple[float, ...]  # the fused (planar) pose at every simulation step
     lock_losses_per_km: float  # ground_truth drives: EKF resets at the truth per km of route
     ct_mean_s: float  # mean computation time per query (NaN without queries)
@@ -165,6 +184,7 @@ def episode_metrics(result: EpisodeResult) -> EpisodeMetrics:
             np.array([x.position_error_m for x in locs]), np.array([x.yaw_error_deg for x in locs])
         ),
         confident_wrong=confident_wrong(pos3d, rot),
+        place_recall=place_recall([x.retrieval_distances_m for x in locs]),
         recall_ekf=recall(tr.ekf_position_error_m, ekf_yaw_err) if len(tr.time_s) else (),
         lock_losses_per_km=len(result.lock_losses_s) / (result.route_length_m / 1000.0),
         ct_mean_s=float(np.mean([x.compute_time_s for x in locs])) if locs else float("nan"),

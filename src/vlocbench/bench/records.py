@@ -50,6 +50,9 @@ class LocalizationRecord:
     latency_s: float
     fused: bool | None
     reason: str
+    # place recognition: from the true vehicle position to where the vehicle would stand for each
+    # of the retrieval's best images, best first (m); empty for localizers without retrieval
+    retrieval_distances_m: tuple[float, ...] = ()
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -29,6 +29,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from vlocbench.bench.experiment import plan_from_stored
+from vlocbench.bench.metrics import PLACE_RADII_M
 from vlocbench.bench.paper import FACTOR_OF_AXIS, PaperTable, paper_results, shape
 from vlocbench.bench.store import EpisodeRow, read_latest_run
 from vlocbench.bench.summary import BASELINE, Cell, Summary, summarize
@@ -118,6 +119,24 @@ def recall_table(summary: Summary, town: str, kind: RecallKind = "6dof") -> Tabl
                 text += f" ({_fmt(100 * c.confident_wrong)} wrong)"
             row.append(text)
         rows.append(row)
+    return header, rows
+
+
+def place_recall_table(summary: Summary, town: str) -> Table:
+    """Retrieval alone in the ground-truth drive: Recall@1 / @5 / @10 (%) of a retrieved image
+    within each distance, a row per (method, distance)."""
+    header = ["method", "within", *(_short(summary, s.label) for s in summary.setups)]
+    rows = []
+    for method in (m for m in summary.methods if m != BASELINE):
+        for j, radius_m in enumerate(PLACE_RADII_M):
+            row = [method, f"{radius_m:g} m"]
+            for s in summary.setups:
+                c = summary.cell(town, method, s.label)
+                r = c.place_recall if c is not None else None
+                values = r[j :: len(PLACE_RADII_M)] if r else ()
+                finite = r is not None and any(np.isfinite(v) for v in values)
+                row.append(" / ".join(_fmt(100 * v) for v in values) if finite else "–")
+            rows.append(row)
     return header, rows
 
 
@@ -343,6 +362,9 @@ def _tables(summary: Summary) -> list[tuple[str, Table]]:
             out.append((f"{name}: recall (%) at (0.25 m, 2°) / (0.5 m, 5°) / (5 m, 10°) on 6-DoF "
                         "errors, ground-truth drive, raw localization (share of answers confident "
                         "and wrong: beyond (5 m, 10°))", recall_table(summary, town)))  # fmt: skip
+            out.append((f"{name}: place recognition alone, Recall@1 / @5 / @10 (%) of a retrieved "
+                        "gallery image within 5, 10 and 25 m, same drive",
+                        place_recall_table(summary, town)))  # fmt: skip
             out.append((f"{name}: recall (%) on planar (x, y, yaw) errors, same drive",
                         recall_table(summary, town, "planar")))  # fmt: skip
             out.append((f"{name}: recall (%) of the fused (EKF) pose at every step, same drive "

@@ -43,6 +43,7 @@ class Cell:
     recall: tuple[float, ...] | None  # raw localization, 6-DoF errors, ground-truth drive
     recall_planar: tuple[float, ...] | None  # the same on planar (x, y, yaw) errors
     confident_wrong: float  # share of the drive's queries answered beyond (5 m, 10 deg)
+    place_recall: tuple[float, ...] | None  # retrieval alone, Recall@N within d m (metrics.PLACE_*)
     recall_ekf: tuple[float, ...] | None
     lock_losses_per_km: float  # of the EKF in the ground-truth drive (NaN: none, or not recorded)
     ct_s: float  # mean computation time per query (NaN: none)
@@ -112,6 +113,8 @@ def _cell(key: tuple[str, str, str], group: list[EpisodeRow], errors: int) -> Ce
         recall=tuple(rec[0]["recall"]) if rec else None,
         recall_planar=tuple(rec[0]["recall_planar"]) if rec else None,
         confident_wrong=rec[0]["confident_wrong"] if rec else float("nan"),
+        # episodes stored before place recognition was scored have none
+        place_recall=tuple(rec[0]["place_recall"]) if rec and "place_recall" in rec[0] else None,
         recall_ekf=tuple(rec[0]["recall_ekf"]) if rec else None,
         lock_losses_per_km=rec[0]["lock_losses_per_km"] if rec else float("nan"),
         ct_s=_mean([r.metrics["ct_mean_s"] for r in group if r.metrics]),

@@ -13,6 +13,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from vlocbench.bench.localizer import LocalizationQuery, PoseEstimate
+from vlocbench.geometry import invert_pose
 from vlocbench.loc.gallery import CameraModel
 from vlocbench.loc.localizer import LocalizerConfig, MapLocalizer
 from vlocbench.sim import Camera
@@ -58,10 +59,17 @@ class VisualLocalizer:
             query.prior_world_from_vehicle,
         )
         elapsed = time.perf_counter() - start
+        # where the vehicle would stand to take each of the first camera's retrieved images
+        first = query.frames[0].camera.extrinsics.vehicle_from_cam()
+        ranked = result.cameras[0].ranked_world_from_cam @ invert_pose(first)
+        ranked_xyz = {"ranked_xyz_m": ranked[:, :3, 3]}
         if not result.success:
-            return PoseEstimate.failure(result.reason, elapsed)
+            return PoseEstimate(
+                False, compute_time_s=elapsed, reason=result.reason, info=ranked_xyz
+            )
         assert result.world_from_rig is not None
         info = {
+            **ranked_xyz,
             "camera": "rig" if result.generalized else query.frames[result.camera].camera.name,
             "inliers": result.num_inliers,
             "correspondences": sum(r.num_correspondences for r in result.cameras),

@@ -104,6 +104,9 @@ def world_covariance(cam_from_world: NDArray[np.float64],
     return jacobian @ np.asarray(cam_from_world_covariance) @ jacobian.T
 
 
+RANKED = 10  # retrieval ranks kept per query: place recognition's Recall@1, 5 and 10
+
+
 @dataclass(frozen=True, kw_only=True)
 class QueryResult:
     """``world_from_cam`` (4, 4) on success; ``world_from_cam_covariance`` (6, 6) from the PnP
@@ -116,6 +119,9 @@ class QueryResult:
     num_inliers: int = 0
     num_correspondences: int = 0
     retrieved: tuple[str, ...] = ()
+    # the retrieval's best max(top_k, RANKED) map images' poses (R, 4, 4), best first: what the
+    # place-recognition metric scores
+    ranked_world_from_cam: NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 4, 4)))
     cluster: tuple[str, ...] = ()
     world_from_cam_covariance: NDArray[np.float64] | None = None
     seconds: dict[str, float] = field(default_factory=dict)
@@ -218,13 +224,14 @@ class MapLocalizer:
 
     def _retrieve(self, image: NDArray[np.uint8], feats: Features,
                   prior_world_from_cam: NDArray[np.float64] | None) -> NDArray[np.int64]:  # fmt: skip
-        c = self.config
+        """The best ``max(top_k, RANKED)`` map images, best first."""
+        c, k = self.config, max(self.config.top_k, RANKED)
         if self.descriptor is None:
             if prior_world_from_cam is None:
                 raise LocalizationError("pose-prior retrieval needs a prior pose")
-            return nearest_poses(self.poses, prior_world_from_cam, c.top_k, c.prior_max_angle_deg)
+            return nearest_poses(self.poses, prior_world_from_cam, k, c.prior_max_angle_deg)
         assert self.global_descriptors is not None
-        return top_k(self.descriptor.describe(image, feats), self.global_descriptors, c.top_k)
+        return top_k(self.descriptor.describe(image, feats), self.global_descriptors, k)
 
     def _clusters(self, retrieved: NDArray[np.int64]) -> list[list[int]]:
         """Connected groups of retrieved images that share 3D points, in retrieval order."""
@@ -263,11 +270,13 @@ class MapLocalizer:
         feats = self.extractor.extract(image)
         seconds["features"] = time.perf_counter() - t
         t = time.perf_counter()
-        retrieved = self._retrieve(image, feats, prior_world_from_cam)
+        ranked = self._retrieve(image, feats, prior_world_from_cam)
+        retrieved = ranked[: c.top_k]
+        ranked_poses = self.poses[ranked]
         seconds["retrieval"] = time.perf_counter() - t
         if len(feats) < c.min_points:
             reason = f"only {len(feats)} features in the image"
-            return self._failed(retrieved, seconds, reason), None
+            return self._failed(retrieved, ranked_poses, seconds, reason), None
         best = self._best_pose(feats, colmap_camera(camera, 1), retrieved, seconds)
         n_corr = 0 if best.corr is None else len(best.corr.points2D)
         if best.answer is None or best.inliers < c.min_inliers:
@@ -276,7 +285,7 @@ class MapLocalizer:
                 if best.answer is not None
                 else f"PnP found no pose from {n_corr} correspondences"
             )
-            return self._failed(retrieved, seconds, reason, n_corr), best.corr
+            return self._failed(retrieved, ranked_poses, seconds, reason, n_corr), best.corr
         cam_from_world = pose_of(best.answer["cam_from_world"])
         covariance = best.answer.get("covariance")
         return QueryResult(
@@ -285,6 +294,7 @@ class MapLocalizer:
             num_inliers=best.inliers,
             num_correspondences=n_corr,
             retrieved=tuple(self.images[i].name for i in retrieved),
+            ranked_world_from_cam=ranked_poses,
             cluster=tuple(self.images[i].name for i in best.cluster),
             world_from_cam_covariance=(
                 None if covariance is None else world_covariance(cam_from_world, covariance)
@@ -408,13 +418,13 @@ class MapLocalizer:
             return None
         return invert_pose(pose_of(answer["rig_from_world"])), inliers
 
-    def _failed(self, retrieved: NDArray[np.int64], seconds: dict[str, float], reason: str,
-                n_corr: int = 0) -> QueryResult:  # fmt: skip
+    def _failed(self, retrieved: NDArray[np.int64], ranked_poses: NDArray[np.float64],
+                seconds: dict[str, float], reason: str, n_corr: int = 0) -> QueryResult:  # fmt: skip
         names = tuple(self.images[i].name for i in retrieved)
         if self.config.fallback_to_retrieval and len(retrieved):
             pose = self.images[int(retrieved[0])].world_from_cam
             return QueryResult(success=True, world_from_cam=pose, num_correspondences=n_corr,
                                retrieved=names, cluster=names[:1], seconds=seconds, reason=reason,
-                               fallback=True)  # fmt: skip
+                               fallback=True, ranked_world_from_cam=ranked_poses)  # fmt: skip
         return QueryResult(success=False, num_correspondences=n_corr, retrieved=names,
-                           seconds=seconds, reason=reason)  # fmt: skip
+                           seconds=seconds, reason=reason, ranked_world_from_cam=ranked_poses)  # fmt: skip
