@@ -6,12 +6,12 @@ import pytest
 from tests.bench.fakes import synthetic_result
 from vlocbench.bench.metrics import (
     confident_wrong,
-    place_recall,
     drift_segments,
     episode_metrics,
     failure_rate,
     failure_rate_by_cause,
     fragmentation,
+    place_recall,
     pooled_drift,
     recall,
 )
