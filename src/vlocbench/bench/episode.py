@@ -182,6 +182,7 @@ def _record(p: _InFlight, fused: bool | None) -> LocalizationRecord:
         fused=fused,
         reason=e.reason,
         retrieval_distances_m=tuple(float(d) for d in distances),
+        retrieved_images=tuple(str(n) for n in e.info.get("retrieved", ())),
     )
 
 

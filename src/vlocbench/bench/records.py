@@ -53,6 +53,7 @@ class LocalizationRecord:
     # place recognition: from the true vehicle position to where the vehicle would stand for each
     # of the retrieval's best images, best first (m); empty for localizers without retrieval
     retrieval_distances_m: tuple[float, ...] = ()
+    retrieved_images: tuple[str, ...] = ()  # the gallery images retrieval chose, best first
 
 
 @dataclass(frozen=True, kw_only=True)

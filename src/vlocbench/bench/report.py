@@ -33,6 +33,7 @@ from vlocbench.bench.metrics import PLACE_RADII_M
 from vlocbench.bench.paper import FACTOR_OF_AXIS, PaperTable, paper_results, shape
 from vlocbench.bench.store import EpisodeRow, read_latest_run
 from vlocbench.bench.summary import BASELINE, Cell, Summary, summarize
+from vlocbench.bench.view import VIEW_DIR
 
 REPORT_DIR = "report"
 COLORS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2", "#17becf")
@@ -605,14 +606,31 @@ def _write_figures(summary: Summary, out: Path) -> list[Path]:
     return figures
 
 
-def _write_page(summary: Summary, episodes: int, tables: list[tuple[str, Table]],
+def _recordings_html(rows: Sequence[EpisodeRow], out: Path) -> str:
+    """Links to the rerun recordings ``vlocbench view`` wrote next to the report."""
+    folder = out.parent / VIEW_DIR
+    by_key = {r.key: r for r in rows}
+    items = []
+    for path in sorted(folder.glob("*.rrd")) if folder.is_dir() else ():
+        r = by_key.get(path.stem)
+        what = (f"{r.kind} drive, {r.town}, {_method_label(r.method)}, {r.setup}, "
+                f"repetition {r.repetition}" if r else "an episode of another run")  # fmt: skip
+        items.append(
+            f'<li><a href="../{VIEW_DIR}/{path.name}">{path.name}</a>: {html.escape(what)}</li>'
+        )
+    hint = ("<p>Make one with <code>vlocbench view OUTPUT --setup LABEL --method NAME</code> and open"
+            " it with <code>rerun FILE.rrd</code>.</p>")  # fmt: skip
+    return f"<h2>Recordings (rerun)</h2><ul>{''.join(items)}</ul>{hint}" if items else ""
+
+
+def _write_page(summary: Summary, rows: Sequence[EpisodeRow], tables: list[tuple[str, Table]],
                 figures: list[Path], examples: bool, out: Path) -> Path:  # fmt: skip
     spec = summary.spec
     page = out / "index.html"
     page.write_text(
         _page_template().substitute(
             title=html.escape(spec.name),
-            episodes=episodes,
+            episodes=len(rows),
             errors=len(summary.errors),
             spec_hash=spec.spec_hash,
             towns=html.escape(", ".join(summary.town_names[t] for t in summary.towns)),
@@ -624,6 +642,7 @@ def _write_page(summary: Summary, episodes: int, tables: list[tuple[str, Table]]
             ),
             figures="\n".join(_figure_html(p.read_bytes(), "image/png", p.stem) for p in figures),
             examples=_examples_html(summary) if examples else "",
+            recordings=_recordings_html(rows, out),
             error_details=_errors_html(summary.errors),
         )
     )
@@ -639,7 +658,7 @@ def write_report(output_dir: str | Path, examples: bool = True) -> ReportFiles:
     tables = _tables(summary)
     md, tex = _write_tables(out, tables)
     figures = _write_figures(summary, out)
-    page = _write_page(summary, len(rows), tables, figures, examples, out)
+    page = _write_page(summary, rows, tables, figures, examples, out)
     return ReportFiles(page, md, tex, tuple(figures), summary)
 
 

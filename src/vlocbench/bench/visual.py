@@ -62,18 +62,18 @@ class VisualLocalizer:
         # where the vehicle would stand to take each of the first camera's retrieved images
         first = query.frames[0].camera.extrinsics.vehicle_from_cam()
         ranked = result.cameras[0].ranked_world_from_cam @ invert_pose(first)
-        ranked_xyz = {"ranked_xyz_m": ranked[:, :3, 3]}
+        retrieval = {
+            "ranked_xyz_m": ranked[:, :3, 3],
+            "retrieved": [name for r in result.cameras for name in r.retrieved],
+        }
         if not result.success:
-            return PoseEstimate(
-                False, compute_time_s=elapsed, reason=result.reason, info=ranked_xyz
-            )
+            return PoseEstimate(False, compute_time_s=elapsed, reason=result.reason, info=retrieval)
         assert result.world_from_rig is not None
         info = {
-            **ranked_xyz,
+            **retrieval,
             "camera": "rig" if result.generalized else query.frames[result.camera].camera.name,
             "inliers": result.num_inliers,
             "correspondences": sum(r.num_correspondences for r in result.cameras),
-            "retrieved": [name for r in result.cameras for name in r.retrieved],
             "seconds": result.seconds,
             "fallback": not result.generalized and result.cameras[result.camera].fallback,
         }

@@ -1,0 +1,235 @@
+"""An episode in 3D: a rerun recording (``vlocbench view``; needs the ``view`` extra).
+
+What it holds, on the ``sim_time`` timeline (seconds of the episode) where things move:
+
+- ``town/buildings`` (boxes) and ``route`` (the line the car should follow), static;
+- ``truth`` and ``ekf``: the car's true and filtered poses (a box each) over time, and
+  ``truth/path`` / ``ekf/path`` the whole trajectories;
+- ``localization``: each answer of the localizer at its image time, the camera as a frustum
+  coloured by its error (green within (0.25 m, 2°), yellow within (5 m, 10°), red beyond; grey when
+  the EKF rejected it), and ``localization/log`` a line for every query, failures with their reason;
+- ``failures``: where the car failed (red), with the cause;
+- ``errors/*``: the answer's position and rotation errors as plots;
+- with ``images``: the query image rendered again from the true pose (traffic is not replayed)
+  under ``localization/camera/image``, and the first retrieved gallery images under ``retrieved/k``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from vlocbench.bench.store import EpisodeRow, StoreError, read_episode_table, read_latest_run
+from vlocbench.bench.towns import route_named, town_named
+from vlocbench.config import from_dict
+from vlocbench.errors import MachineError
+from vlocbench.geometry import planar_pose, rpy_to_matrix
+from vlocbench.interfaces import Array
+from vlocbench.sim.camera import Camera
+from vlocbench.sim.conditions import Conditions
+
+VIEW_DIR = "view"  # recordings go to OUTPUT/view/KEY.rrd by default
+RETRIEVED_SHOWN = 3  # gallery images shown beside a query
+CAR_HALF_SIZE_M = (2.25, 0.9, 0.75)
+GOOD, FAIR, WRONG, REJECTED = (40, 200, 60), (230, 200, 40), (220, 40, 40), (140, 140, 140)
+
+
+def _rerun() -> Any:
+    try:
+        import rerun
+    except ImportError as exc:
+        raise MachineError(
+            f"the view extra is not installed ({exc}): pip install 'vlocbench[view]'"
+        ) from None
+    return rerun
+
+
+def choose_episode(output_dir: str | Path, key: str | None = None, setup: str | None = None,
+                   method: str | None = None) -> EpisodeRow:  # fmt: skip
+    """The finished episode ``key``, or the first one (failure drives first) of ``setup`` and
+    ``method`` (each optional); a clear error lists what there is."""
+    _, rows = read_latest_run(output_dir)
+    done = [r for r in rows if r.status == "ok"]
+    if key is not None:
+        match = [r for r in done if r.key == key or r.key.startswith(key)]
+        if len(match) != 1:
+            raise StoreError(f"{output_dir}: {len(match)} finished episodes match key {key!r}")
+        return match[0]
+    match = [
+        r for r in done
+        if setup in (None, r.setup, r.setup.split(".", 1)[-1]) and method in (None, r.method)
+    ]  # fmt: skip
+    if not match:
+        there = sorted({f"{r.setup} / {r.method}" for r in done})
+        raise StoreError(f"{output_dir}: no finished episode of setup {setup!r} and method "
+                         f"{method!r}; there are: {', '.join(there)}")  # fmt: skip
+    order = {"failure": 0, "recall": 1, "baseline": 2}
+    return min(match, key=lambda r: (order.get(r.kind, 3), r.repetition, r.key))
+
+
+def _colour(locs: dict[str, Array], k: int) -> tuple[int, int, int]:
+    if locs["fused"][k] is False or locs["fused"][k] == 0:  # parquet keeps None/bool as object
+        return REJECTED
+    position_m, rotation_deg = locs["position_error_3d_m"][k], locs["rotation_error_deg"][k]
+    if position_m <= 0.25 and rotation_deg <= 2.0:
+        return GOOD
+    return FAIR if position_m <= 5.0 and rotation_deg <= 10.0 else WRONG
+
+
+def _vehicle_pose(locs: dict[str, Array], k: int) -> Array:
+    """The estimate's world_from_vehicle (6-DoF where the episode stored it)."""
+    z, roll, pitch = (
+        float(locs[c][k]) if c in locs else 0.0 for c in ("z_m", "roll_rad", "pitch_rad")
+    )
+    pose = np.eye(4)
+    pose[:3, :3] = rpy_to_matrix(roll, pitch, float(locs["yaw_rad"][k]))
+    pose[:3, 3] = [locs["x_m"][k], locs["y_m"][k], z]
+    return pose
+
+
+def record_episode(output_dir: str | Path, row: EpisodeRow, path: str | Path,
+                   images: bool = False, spawn: bool = False) -> Path:  # fmt: skip
+    """Write the rerun recording of ``row`` (an episode stored in ``output_dir``) to ``path``;
+    ``spawn`` also opens the viewer."""
+    rr = _rerun()
+    output_dir, path = Path(output_dir), Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tr = read_episode_table(output_dir, row.key, "trajectory")
+    try:
+        locs = read_episode_table(output_dir, row.key, "localizations")
+    except StoreError:
+        locs = {}
+    rec = rr.RecordingStream("vlocbench", recording_id=row.key)
+    if spawn:
+        rec.spawn()
+    rec.save(str(path))
+    rec.log("/", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+    town = town_named(row.config["town"])
+    _log_town(
+        rr, rec, town, route_named(row.config["town"], float(row.metrics["route_length_m"])).xy
+    )
+    for name, prefix, colour in (("truth", "true", (40, 120, 230)), ("ekf", "ekf", (240, 140, 30))):
+        xyz = np.c_[tr[f"{prefix}_x_m"], tr[f"{prefix}_y_m"], np.full(len(tr["time_s"]), 0.1)]
+        rec.log(f"{name}/path", rr.LineStrips3D([xyz], colors=[colour]), static=True)
+        car = rr.Boxes3D(half_sizes=[CAR_HALF_SIZE_M], centers=[(0, 0, 0.75)], colors=[colour])
+        rec.log(f"{name}/car", car, static=True)
+    for k, t in enumerate(tr["time_s"]):
+        rec.set_time("sim_time", duration=float(t))
+        for name, prefix in (("truth", "true"), ("ekf", "ekf")):
+            pose = planar_pose(
+                tr[f"{prefix}_x_m"][k], tr[f"{prefix}_y_m"][k], tr[f"{prefix}_yaw_rad"][k]
+            )
+            rec.log(name, rr.Transform3D(translation=pose[:3, 3], mat3x3=pose[:3, :3]))
+    sites = row.metrics.get("failure_sites_xy", [])
+    if sites:
+        causes = list(row.metrics.get("failure_causes", []))  # one per failure, in order
+        points = rr.Points3D([(x, y, 1.0) for x, y in sites], radii=1.5, colors=[WRONG],
+                             labels=causes if len(causes) == len(sites) else None)  # fmt: skip
+        rec.log("failures", points, static=True)
+    if locs and "success" in locs:
+        _log_localizations(rr, rec, output_dir, row, locs, images)
+    rec.flush()
+    return path
+
+
+def _log_town(rr: Any, rec: Any, town: Any, route_xy: Array) -> None:
+    centres, halves = [], []
+    for b in town.buildings:
+        x0, y0, x1, y1 = b.rect
+        centres.append(((x0 + x1) / 2, (y0 + y1) / 2, b.height_m / 2))
+        halves.append(((x1 - x0) / 2, (y1 - y0) / 2, b.height_m / 2))
+    rec.log("town/buildings", rr.Boxes3D(centers=centres, half_sizes=halves, colors=[(170, 160, 150)]),
+            static=True)  # fmt: skip
+    rec.log("route", rr.LineStrips3D([np.c_[route_xy, np.full(len(route_xy), 0.05)]], colors=[(90, 90, 90)]),
+            static=True)  # fmt: skip
+
+
+def _log_localizations(rr: Any, rec: Any, output_dir: Path, row: EpisodeRow,
+                       locs: dict[str, Array], images: bool) -> None:  # fmt: skip
+    setup = row.config["setup"]
+    conditions = from_dict(Conditions, setup["conditions"])
+    vp = conditions.viewpoint
+    camera = from_dict(Camera, setup["cameras"][0]).offset(vp.dz_m, vp.pitch_down_deg)
+    vehicle_from_cam = camera.extrinsics.vehicle_from_cam()
+    intrinsics = camera.intrinsics
+    focal_px = intrinsics.width / 2 / np.tan(np.radians(intrinsics.fov_deg) / 2)
+    renderer = _Renderer(row, conditions, camera) if images else None
+    gallery = _gallery_of(row) if images else None
+    for k, t in enumerate(locs["time_s"]):
+        rec.set_time("sim_time", duration=float(t))
+        ok = bool(locs["success"][k])
+        if ok:
+            world_from_cam = _vehicle_pose(locs, k) @ vehicle_from_cam
+            rec.log(
+                "localization",
+                rr.Transform3D(translation=world_from_cam[:3, 3], mat3x3=world_from_cam[:3, :3]),
+            )
+            rec.log("localization/camera", rr.Pinhole(focal_length=float(focal_px), width=intrinsics.width,
+                                                     height=intrinsics.height, image_plane_distance=3.0,
+                                                     color=_colour(locs, k), line_width=0.05))  # fmt: skip
+            rec.log("errors/position_m", rr.Scalars(float(locs["position_error_3d_m"][k])))
+            rec.log("errors/rotation_deg", rr.Scalars(float(locs["rotation_error_deg"][k])))
+            text = (f"answer: {locs['position_error_3d_m'][k]:.2f} m, {locs['rotation_error_deg'][k]:.1f} deg"
+                    + ("" if locs["fused"][k] is None else f", fused: {bool(locs['fused'][k])}"))  # fmt: skip
+        else:
+            text = f"no answer: {locs['reason'][k]}"
+        rec.log("localization/log", rr.TextLog(text, level="INFO" if ok else "WARN"))
+        if renderer is not None:
+            truth = planar_pose(
+                float(locs["true_x_m"][k]),
+                float(locs["true_y_m"][k]),
+                float(locs["true_yaw_rad"][k]),
+            )
+            rec.log("localization/camera/image", _thumbnail(rr, renderer.image(truth, float(t))))
+        names = locs.get("retrieved_images")
+        if gallery is not None and names is not None:
+            for j, name in enumerate(list(names[k])[:RETRIEVED_SHOWN]):
+                rec.log(f"retrieved/{j}", _thumbnail(rr, gallery.load_image(str(name))))
+    if renderer is not None:
+        renderer.close()
+
+
+def _thumbnail(rr: Any, image: Array) -> Any:
+    """An image at half size as JPEG: a drive's worth of queries stays a few tens of MB."""
+    import cv2
+
+    h, w = image.shape[:2]
+    small = cv2.resize(image, (w // 2, h // 2), interpolation=cv2.INTER_AREA)
+    return rr.Image(small).compress(jpeg_quality=80)
+
+
+def _gallery_of(row: EpisodeRow) -> Any:
+    from vlocbench.loc.gallery import Gallery
+    from vlocbench.loc.mapping import map_info
+
+    map_dir = row.config.get("map_dir")
+    return Gallery.load(map_info(map_dir)[1]) if map_dir else None
+
+
+class _Renderer:
+    """The episode's camera rendered again at a true pose (the scene without traffic)."""
+
+    def __init__(self, row: EpisodeRow, conditions: Conditions, camera: Camera) -> None:
+        from dataclasses import replace
+
+        from vlocbench.sim import Simulator
+
+        static = replace(
+            conditions, viewpoint=replace(conditions.viewpoint, dz_m=0.0, pitch_down_deg=0.0)
+        )
+        self.sim = Simulator(town_named(row.config["town"]), static)
+        self.camera = camera
+
+    def image(self, world_from_vehicle: Array, time_s: float) -> Array:
+        x, y = world_from_vehicle[0, 3], world_from_vehicle[1, 3]
+        self.sim.teleport(
+            float(x),
+            float(y),
+            float(np.arctan2(world_from_vehicle[1, 0], world_from_vehicle[0, 0])),
+        )
+        return self.sim.render([self.camera], frame_id=round(time_s / self.sim.dt_s))[0].image
+
+    def close(self) -> None:
+        self.sim.close()
