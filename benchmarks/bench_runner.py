@@ -40,6 +40,7 @@ def main() -> None:
     )
     shutil.rmtree(plan.output_dir, ignore_errors=True)
     run_experiment(plan, progress=False)  # gallery, map, imports, caches
+    first: float | None = None  # episodes/hour of the first worker count
     for workers in (int(w) for w in args.workers.split(",")):
         rates, overheads, stores = [], [], []
         for k in range(args.repeats):
@@ -56,8 +57,10 @@ def main() -> None:
             if s.harness_overhead is not None:  # None: a worker died
                 overheads.append(100 * s.harness_overhead)
             stores.append(100 * s.store_overhead)
+        rate = statistics.median(rates)
+        first = first or rate
         print(
-            f"{workers} worker(s): {statistics.median(rates):.0f} episodes/hour "
+            f"{workers} worker(s): {rate:.0f} episodes/hour ({rate / first:.2f}x the first) "
             f"({s.finished} episodes of about {s.episode_s / s.finished:.1f} s in the worker); "
             f"harness overhead {statistics.median(overheads):.1f} % of episode time "
             f"(writing results {statistics.median(stores):.2f} %; the rest is scheduling, "

@@ -166,14 +166,17 @@ def _drive(args: argparse.Namespace) -> int:
 def _run(args: argparse.Namespace) -> int:
     from vlocbench.bench.experiment import load_experiment
     from vlocbench.bench.report import summary_lines, write_report
-    from vlocbench.bench.runner import run_experiment
+    from vlocbench.bench.runner import default_workers, run_experiment
 
     plan = load_experiment(args.experiment)
     if args.output:
         plan = plan.with_output(args.output)
     with _signals_interrupt():
         summary = run_experiment(
-            plan, workers=args.workers, scheduler=args.scheduler, progress=not args.no_progress
+            plan,
+            workers=args.workers or default_workers(),
+            scheduler=args.scheduler,
+            progress=not args.no_progress,
         )
     overhead = summary.harness_overhead
     print(
@@ -546,7 +549,7 @@ def _add_experiment_verbs(sub: Any, shared: dict[str, argparse.ArgumentParser]) 
     p = sub.add_parser("run", parents=[shared["report"]],
                        help="run an experiment file: galleries, maps, episodes, then the report")  # fmt: skip
     p.add_argument("experiment", type=Path, help="experiment YAML (see experiments/)")
-    p.add_argument("--workers", type=_count, default=1, help="local worker processes")
+    p.add_argument("--workers", type=_count, help="local worker processes (default: one per core)")
     p.add_argument("--scheduler", help="Dask scheduler address, e.g. tcp://127.0.0.1:8786")
     p.add_argument("--output", type=Path, help="output folder (default: the experiment's)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")

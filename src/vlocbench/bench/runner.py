@@ -145,10 +145,23 @@ def run_task(task: EpisodeTask) -> EpisodeOutcome:
     return EpisodeOutcome(task.key, result, time.perf_counter() - t)
 
 
+# a pool worker's thread pools: one thread each (OpenMP for torch, MKL, Mesa's llvmpipe renderer),
+# since the pool already puts one worker on each core
+WORKER_THREADS_ENV = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "LP_NUM_THREADS": "1"}
+
+
+def default_workers() -> int:
+    """Local workers by default: one per core this process may use."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+
+
 def _worker_init(driver_pid: int) -> None:
-    # one process per core: OpenMP threads spinning against each other make torch crawl. Set
-    # before torch is imported (by the first localizer), which reads it then.
-    os.environ["OMP_NUM_THREADS"] = "1"
+    # threads of a worker spinning against the other workers' make every one crawl; set before
+    # torch and the renderer start (with the first episode), which read them then
+    os.environ.update(WORKER_THREADS_ENV)
+    import cv2
+
+    cv2.setNumThreads(1)
     # Ctrl-C reaches the whole process group: the driver alone handles it (it stops the workers)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     threading.Thread(target=_exit_with_driver, args=(driver_pid,), daemon=True).start()

@@ -23,12 +23,14 @@ import numpy as np
 
 from vlocbench.bench.store import EpisodeRow, StoreError, read_episode_table, read_latest_run
 from vlocbench.bench.towns import route_named, town_named
+from vlocbench.bench.visual import camera_model
 from vlocbench.config import from_dict
 from vlocbench.errors import MachineError
 from vlocbench.geometry import planar_pose, rpy_to_matrix
 from vlocbench.interfaces import Array
 from vlocbench.sim.camera import Camera
 from vlocbench.sim.conditions import Conditions
+from vlocbench.sim.town import Town
 
 VIEW_DIR = "view"  # recordings go to OUTPUT/view/KEY.rrd by default
 RETRIEVED_SHOWN = 3  # gallery images shown beside a query
@@ -70,7 +72,8 @@ def choose_episode(output_dir: str | Path, key: str | None = None, setup: str | 
 
 
 def _colour(locs: dict[str, Array], k: int) -> tuple[int, int, int]:
-    if locs["fused"][k] is False or locs["fused"][k] == 0:  # parquet keeps None/bool as object
+    fused = locs["fused"][k]  # True, False, or None when never offered to the EKF
+    if fused is not None and not fused:
         return REJECTED
     position_m, rotation_deg = locs["position_error_3d_m"][k], locs["rotation_error_deg"][k]
     if position_m <= 0.25 and rotation_deg <= 2.0:
@@ -129,32 +132,32 @@ def record_episode(output_dir: str | Path, row: EpisodeRow, path: str | Path,
                              labels=causes if len(causes) == len(sites) else None)  # fmt: skip
         rec.log("failures", points, static=True)
     if locs and "success" in locs:
-        _log_localizations(rr, rec, output_dir, row, locs, images)
+        _log_localizations(rr, rec, row, locs, images)
     rec.flush()
     return path
 
 
-def _log_town(rr: Any, rec: Any, town: Any, route_xy: Array) -> None:
+def _log_town(rr: Any, rec: Any, town: Town, route_xy: Array) -> None:
     centres, halves = [], []
     for b in town.buildings:
         x0, y0, x1, y1 = b.rect
         centres.append(((x0 + x1) / 2, (y0 + y1) / 2, b.height_m / 2))
         halves.append(((x1 - x0) / 2, (y1 - y0) / 2, b.height_m / 2))
-    rec.log("town/buildings", rr.Boxes3D(centers=centres, half_sizes=halves, colors=[(170, 160, 150)]),
-            static=True)  # fmt: skip
-    rec.log("route", rr.LineStrips3D([np.c_[route_xy, np.full(len(route_xy), 0.05)]], colors=[(90, 90, 90)]),
-            static=True)  # fmt: skip
+    buildings = rr.Boxes3D(centers=centres, half_sizes=halves, colors=[(170, 160, 150)])
+    rec.log("town/buildings", buildings, static=True)
+    route = np.c_[route_xy, np.full(len(route_xy), 0.05)]
+    rec.log("route", rr.LineStrips3D([route], colors=[(90, 90, 90)]), static=True)
 
 
-def _log_localizations(rr: Any, rec: Any, output_dir: Path, row: EpisodeRow,
-                       locs: dict[str, Array], images: bool) -> None:  # fmt: skip
+def _log_localizations(rr: Any, rec: Any, row: EpisodeRow, locs: dict[str, Array],
+                       images: bool) -> None:  # fmt: skip
     setup = row.config["setup"]
     conditions = from_dict(Conditions, setup["conditions"])
     vp = conditions.viewpoint
     camera = from_dict(Camera, setup["cameras"][0]).offset(vp.dz_m, vp.pitch_down_deg)
     vehicle_from_cam = camera.extrinsics.vehicle_from_cam()
     intrinsics = camera.intrinsics
-    focal_px = intrinsics.width / 2 / np.tan(np.radians(intrinsics.fov_deg) / 2)
+    focal_px = camera_model(camera).K[0, 0]
     renderer = _Renderer(row, conditions, camera) if images else None
     gallery = _gallery_of(row) if images else None
     for k, t in enumerate(locs["time_s"]):
@@ -166,13 +169,20 @@ def _log_localizations(rr: Any, rec: Any, output_dir: Path, row: EpisodeRow,
                 "localization",
                 rr.Transform3D(translation=world_from_cam[:3, 3], mat3x3=world_from_cam[:3, :3]),
             )
-            rec.log("localization/camera", rr.Pinhole(focal_length=float(focal_px), width=intrinsics.width,
-                                                     height=intrinsics.height, image_plane_distance=3.0,
-                                                     color=_colour(locs, k), line_width=0.05))  # fmt: skip
-            rec.log("errors/position_m", rr.Scalars(float(locs["position_error_3d_m"][k])))
-            rec.log("errors/rotation_deg", rr.Scalars(float(locs["rotation_error_deg"][k])))
-            text = (f"answer: {locs['position_error_3d_m'][k]:.2f} m, {locs['rotation_error_deg'][k]:.1f} deg"
-                    + ("" if locs["fused"][k] is None else f", fused: {bool(locs['fused'][k])}"))  # fmt: skip
+            frustum = rr.Pinhole(
+                focal_length=float(focal_px), width=intrinsics.width, height=intrinsics.height,
+                image_plane_distance=3.0, color=_colour(locs, k), line_width=0.05,
+            )  # fmt: skip
+            rec.log("localization/camera", frustum)
+            position_m, rotation_deg = (
+                float(locs["position_error_3d_m"][k]), float(locs["rotation_error_deg"][k])
+            )  # fmt: skip
+            rec.log("errors/position_m", rr.Scalars(position_m))
+            rec.log("errors/rotation_deg", rr.Scalars(rotation_deg))
+            fused = locs["fused"][k]
+            text = f"answer: {position_m:.2f} m, {rotation_deg:.1f} deg" + (
+                "" if fused is None else f", fused: {bool(fused)}"
+            )
         else:
             text = f"no answer: {locs['reason'][k]}"
         rec.log("localization/log", rr.TextLog(text, level="INFO" if ok else "WARN"))
