@@ -316,7 +316,6 @@ def _build_map(args: argparse.Namespace) -> int:
 
 
 def _localize(args: argparse.Namespace) -> int:
-
     import cv2
     import numpy as np
 

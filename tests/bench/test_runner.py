@@ -300,6 +300,8 @@ def test_a_run_exports_for_evo_hloc_and_colmap(tiny, capsys):
     for fmt in ("tum", "kitti", "hloc", "colmap"):
         assert main(["export", str(out), "--format", fmt]) == 0
     assert "files to" in capsys.readouterr().out
+    assert main(["export", str(out), "--format", "csv"]) == 1
+    assert "unknown format 'csv'; valid: colmap, hloc, kitti, tum" in capsys.readouterr().err
     with ResultStore(out, "tiny") as store:
         rows = {r.kind: r for r in store.rows() if r.kind != "failure"}
     recall = rows["recall"].key

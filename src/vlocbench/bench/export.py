@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from vlocbench.bench.store import EpisodeRow, StoreError, read_episode_table, read_latest_run
+from vlocbench.bench.store import EpisodeRow, read_episode_table, read_latest_run
 from vlocbench.bench.visual import camera_model
 from vlocbench.config import from_dict, require_one_of
 from vlocbench.geometry import invert_pose, make_pose, quaternion_from_rotation, rpy_to_matrix
@@ -88,9 +88,16 @@ def colmap_intrinsics_line(name: str, camera: Camera) -> str:
     return f"{name} PINHOLE {model.width} {model.height} " + " ".join(f"{v:.9g}" for v in params)
 
 
-def _estimate_poses(locs: dict[str, Array], rows: Array) -> Array:
-    """The stored estimates' world_from_vehicle at ``rows``; episodes stored before the 6-DoF
-    columns were kept have only x, y, yaw."""
+def localizations(output_dir: str | Path, key: str) -> dict[str, Array]:
+    """The episode's stored localizations as columns; empty when it localized nothing (an
+    odometry-only episode stores a table without columns)."""
+    locs = read_episode_table(output_dir, key, "localizations")
+    return locs if "success" in locs else {}
+
+
+def estimate_poses(locs: dict[str, Array], rows: Array) -> Array:
+    """(R, 4, 4) world_from_vehicle of the stored estimates at ``rows``; episodes stored before
+    the 6-DoF columns were kept have only x, y, yaw."""
     six_dof = all(c in locs for c in ("z_m", "roll_rad", "pitch_rad"))
     return vehicle_poses(
         locs["x_m"][rows], locs["y_m"][rows], locs["yaw_rad"][rows],
@@ -109,12 +116,7 @@ def export_episode(output_dir: str | Path, key: str, config: dict[str, Any], fmt
     """The episode ``key`` (its stored ``config``) in ``fmt`` into the folder ``dest``."""
     require_one_of(fmt, FORMATS, "format")
     tr = read_episode_table(output_dir, key, "trajectory")
-    try:
-        locs = read_episode_table(output_dir, key, "localizations")
-    except StoreError:  # odometry only: nothing localized
-        locs = {}
-    if "success" not in locs:
-        locs = {}
+    locs = localizations(output_dir, key)
     if fmt == "hloc":
         recall = config.get("kind") == "recall" and locs
         return _export_hloc(locs, config, dest) if recall else []
@@ -125,7 +127,7 @@ def export_episode(output_dir: str | Path, key: str, config: dict[str, Any], fmt
     if locs:
         answered = np.flatnonzero(locs["success"])
         true = [locs[c][answered] for c in ("true_x_m", "true_y_m", "true_yaw_rad")]
-        series["estimates"] = (locs["time_s"][answered], _estimate_poses(locs, answered))
+        series["estimates"] = (locs["time_s"][answered], estimate_poses(locs, answered))
         series["estimates_truth"] = (locs["time_s"][answered], vehicle_poses(*true))
     if fmt == "tum":
         return [_write(dest / f"{n}.txt", tum_lines(t, p)) for n, (t, p) in series.items()]
@@ -149,7 +151,7 @@ def _export_hloc(locs: dict[str, Array], config: dict[str, Any], dest: Path) -> 
 
     header = "name qw qx qy qz tx ty tz (cam_from_world, COLMAP's convention)"
     return [
-        _write(dest / "results.txt", hloc_lines(*named(answered, _estimate_poses(locs, answered))),
+        _write(dest / "results.txt", hloc_lines(*named(answered, estimate_poses(locs, answered))),
                header),
         _write(dest / "ground_truth.txt", hloc_lines(*named(everything, true)), header),
         _write(

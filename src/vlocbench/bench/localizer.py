@@ -48,8 +48,9 @@ class PoseEstimate:
     info: dict[str, Any] = field(default_factory=dict)
 
     @classmethod
-    def failure(cls, reason: str, compute_time_s: float = 0.0) -> PoseEstimate:
-        return cls(False, compute_time_s=compute_time_s, reason=reason)
+    def failure(cls, reason: str, compute_time_s: float = 0.0,
+                info: dict[str, Any] | None = None) -> PoseEstimate:  # fmt: skip
+        return cls(False, compute_time_s=compute_time_s, reason=reason, info=info or {})
 
 
 @runtime_checkable

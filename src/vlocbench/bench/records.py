@@ -23,8 +23,8 @@ class LocalizationRecord:
     yaw); ``position_error_3d_m`` / ``rotation_error_deg``: 6-DoF, the 3D distance and the full
     rotation angle between the true and estimated vehicle (so camera) orientation, as the paper's
     evaluator measures them. ``z_m``, ``roll_rad``, ``pitch_rad`` complete the estimate to 6-DoF
-    (the car drives on flat ground, so the truth's are 0). ``ekf_*``: the filter's estimate at the image time (before this
-    estimate was fused). ``fused``: True/False once the EKF accepted/rejected it, None when it was
+    (the car drives on flat ground, so the truth's are 0). ``ekf_*``: the filter's estimate at
+    the image time (before this estimate was fused). ``fused``: True/False once the EKF accepted/rejected it, None when it was
     never offered (failure, or a re-initialization came first).
     """
 

@@ -21,12 +21,13 @@ from typing import Any
 
 import numpy as np
 
+from vlocbench.bench.export import estimate_poses, localizations
 from vlocbench.bench.store import EpisodeRow, StoreError, read_episode_table, read_latest_run
 from vlocbench.bench.towns import route_named, town_named
 from vlocbench.bench.visual import camera_model
 from vlocbench.config import from_dict
 from vlocbench.errors import MachineError
-from vlocbench.geometry import planar_pose, rpy_to_matrix
+from vlocbench.geometry import planar_pose
 from vlocbench.interfaces import Array
 from vlocbench.sim.camera import Camera
 from vlocbench.sim.conditions import Conditions
@@ -81,17 +82,6 @@ def _colour(locs: dict[str, Array], k: int) -> tuple[int, int, int]:
     return FAIR if position_m <= 5.0 and rotation_deg <= 10.0 else WRONG
 
 
-def _vehicle_pose(locs: dict[str, Array], k: int) -> Array:
-    """The estimate's world_from_vehicle (6-DoF where the episode stored it)."""
-    z, roll, pitch = (
-        float(locs[c][k]) if c in locs else 0.0 for c in ("z_m", "roll_rad", "pitch_rad")
-    )
-    pose = np.eye(4)
-    pose[:3, :3] = rpy_to_matrix(roll, pitch, float(locs["yaw_rad"][k]))
-    pose[:3, 3] = [locs["x_m"][k], locs["y_m"][k], z]
-    return pose
-
-
 def record_episode(output_dir: str | Path, row: EpisodeRow, path: str | Path,
                    images: bool = False, spawn: bool = False) -> Path:  # fmt: skip
     """Write the rerun recording of ``row`` (an episode stored in ``output_dir``) to ``path``;
@@ -100,10 +90,7 @@ def record_episode(output_dir: str | Path, row: EpisodeRow, path: str | Path,
     output_dir, path = Path(output_dir), Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tr = read_episode_table(output_dir, row.key, "trajectory")
-    try:
-        locs = read_episode_table(output_dir, row.key, "localizations")
-    except StoreError:
-        locs = {}
+    locs = localizations(output_dir, row.key)
     rec = rr.RecordingStream("vlocbench", recording_id=row.key)
     if spawn:
         rec.spawn()
@@ -131,7 +118,7 @@ def record_episode(output_dir: str | Path, row: EpisodeRow, path: str | Path,
         points = rr.Points3D([(x, y, 1.0) for x, y in sites], radii=1.5, colors=[WRONG],
                              labels=causes if len(causes) == len(sites) else None)  # fmt: skip
         rec.log("failures", points, static=True)
-    if locs and "success" in locs:
+    if locs:
         _log_localizations(rr, rec, row, locs, images)
     rec.flush()
     return path
@@ -160,11 +147,12 @@ def _log_localizations(rr: Any, rec: Any, row: EpisodeRow, locs: dict[str, Array
     focal_px = camera_model(camera).K[0, 0]
     renderer = _Renderer(row, conditions, camera) if images else None
     gallery = _gallery_of(row) if images else None
+    world_from_vehicle = estimate_poses(locs, np.arange(len(locs["time_s"])))
     for k, t in enumerate(locs["time_s"]):
         rec.set_time("sim_time", duration=float(t))
         ok = bool(locs["success"][k])
         if ok:
-            world_from_cam = _vehicle_pose(locs, k) @ vehicle_from_cam
+            world_from_cam = world_from_vehicle[k] @ vehicle_from_cam
             rec.log(
                 "localization",
                 rr.Transform3D(translation=world_from_cam[:3, 3], mat3x3=world_from_cam[:3, :3]),
@@ -187,12 +175,8 @@ def _log_localizations(rr: Any, rec: Any, row: EpisodeRow, locs: dict[str, Array
             text = f"no answer: {locs['reason'][k]}"
         rec.log("localization/log", rr.TextLog(text, level="INFO" if ok else "WARN"))
         if renderer is not None:
-            truth = planar_pose(
-                float(locs["true_x_m"][k]),
-                float(locs["true_y_m"][k]),
-                float(locs["true_yaw_rad"][k]),
-            )
-            rec.log("localization/camera/image", _thumbnail(rr, renderer.image(truth, float(t))))
+            truth = (locs["true_x_m"][k], locs["true_y_m"][k], locs["true_yaw_rad"][k])
+            rec.log("localization/camera/image", _thumbnail(rr, renderer.image(*truth, float(t))))
         names = locs.get("retrieved_images")
         if gallery is not None and names is not None:
             for j, name in enumerate(list(names[k])[:RETRIEVED_SHOWN]):
@@ -232,13 +216,9 @@ class _Renderer:
         self.sim = Simulator(town_named(row.config["town"]), static)
         self.camera = camera
 
-    def image(self, world_from_vehicle: Array, time_s: float) -> Array:
-        x, y = world_from_vehicle[0, 3], world_from_vehicle[1, 3]
-        self.sim.teleport(
-            float(x),
-            float(y),
-            float(np.arctan2(world_from_vehicle[1, 0], world_from_vehicle[0, 0])),
-        )
+    def image(self, x_m: float, y_m: float, yaw_rad: float, time_s: float) -> Array:
+        """The camera's image with the car at (x, y, yaw), the episode's noise at ``time_s``."""
+        self.sim.teleport(float(x_m), float(y_m), float(yaw_rad))
         return self.sim.render([self.camera], frame_id=round(time_s / self.sim.dt_s))[0].image
 
     def close(self) -> None:

@@ -67,7 +67,7 @@ class VisualLocalizer:
             "retrieved": [name for r in result.cameras for name in r.retrieved],
         }
         if not result.success:
-            return PoseEstimate(False, compute_time_s=elapsed, reason=result.reason, info=retrieval)
+            return PoseEstimate.failure(result.reason, elapsed, retrieval)
         assert result.world_from_rig is not None
         info = {
             **retrieval,

@@ -345,13 +345,12 @@ def import_colmap(model_dir: str | Path, image_dir: str | Path, out_dir: str | P
 def _triangulate(gallery: Gallery, mapping: MappingConfig, features: FeatureStore,
                  matches: dict[tuple[str, str], np.ndarray], out: Path) -> pycolmap.Reconstruction:  # fmt: skip
     rec = posed_model(gallery)
-    cam_ids = {name: k + 1 for k, name in enumerate(gallery.cameras)}
-    ids = {im.name: k + 1 for k, im in enumerate(gallery.images)}
+    ids = {image.name: image_id for image_id, image in sorted(rec.images.items())}
     db_path = out / "database.db"
     db_path.unlink(missing_ok=True)
     db = pycolmap.Database.open(db_path)
-    for name in gallery.cameras:
-        db.write_camera(rec.cameras[cam_ids[name]], use_camera_id=True)
+    for _, camera in sorted(rec.cameras.items()):
+        db.write_camera(camera, use_camera_id=True)
     for rig in rec.rigs.values():
         db.write_rig(rig, use_rig_id=True)
     for frame in rec.frames.values():

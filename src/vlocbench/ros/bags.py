@@ -3,9 +3,9 @@
 Per episode, in simulated time (the episode starts at 0 s): ``/ground_truth/odom`` and
 ``/ekf/odom`` (``nav_msgs/Odometry`` at every simulation step: the true pose and speed, the EKF's
 pose), ``/wheel_odometry`` (``geometry_msgs/TwistWithCovarianceStamped``: the noisy reading the
-EKF got for each step, with the noise model's variances), ``/visual_pose_estimate`` (``geometry_msgs/PoseWithCovarianceStamped``, each answer of the
-localizer, written when it reached the EKF and stamped with its image's time, covariance the
-paper's 0.1) and ``/visual_pose_truth`` (the true pose at those image times). evo (``evo_ape bag2``),
+EKF got for each step, with the noise model's variances), ``/visual_pose_estimate``
+(``geometry_msgs/PoseWithCovarianceStamped``, each answer of the localizer, written when it
+reached the EKF and stamped with its image's time, covariance the paper's 0.1) and ``/visual_pose_truth`` (the true pose at those image times). evo (``evo_ape bag2``),
 Foxglove and rviz read them.
 """
 

@@ -87,7 +87,6 @@ class RosLocalizer:
             self.executor.spin_once(timeout_sec=0.05)
 
     def localize(self, query: LocalizationQuery) -> PoseEstimate:
-
         self._wait_for_node()
         start = time.perf_counter()
         stamp = stamp_of(query.time_s)
