@@ -225,7 +225,7 @@ def _export(args: argparse.Namespace) -> int:
         from vlocbench.ros.bags import export_bags
     except ImportError as exc:
         raise _missing_ros_extra(exc) from None
-    written = export_bags(args.output)
+    written = export_bags(args.output, images=args.images)
     print(f"wrote {len(written)} bags to {args.output / 'bags'}")
     return 0
 
@@ -562,6 +562,8 @@ def _add_experiment_verbs(sub: Any, shared: dict[str, argparse.ArgumentParser]) 
                      "colmap (the galleries as posed models): in OUTPUT/export/FORMAT")  # fmt: skip
     how.add_argument("--rosbag", action="store_true",
                      help="each episode as a rosbag2 (MCAP) folder in OUTPUT/bags (needs the ros extra)")  # fmt: skip
+    p.add_argument("--images", action="store_true",
+                   help="with --rosbag: the query images too (JPEG, rendered again from the truth)")  # fmt: skip
     p.set_defaults(func=_export)
 
     p = sub.add_parser("view", help="an episode in 3D: a rerun recording (needs the view extra)")
@@ -621,7 +623,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     # ROS's own arguments (``--ros-args ...``) go to rclpy untouched
     cut = argv.index("--ros-args") if "--ros-args" in argv else len(argv)
-    args = build_parser().parse_args(argv[:cut])  # exits with EXIT_USAGE on a bad command line
+    parser = build_parser()
+    args = parser.parse_args(argv[:cut])  # exits with EXIT_USAGE on a bad command line
+    if args.func is _export and args.images and not args.rosbag:
+        parser.error("export --images: query images go into rosbags only; add --rosbag")
     args.ros_args = argv[cut:]
     _configure_logging(
         logging.DEBUG if args.verbose else logging.WARNING if args.quiet else logging.INFO

@@ -22,15 +22,13 @@ from typing import Any
 import numpy as np
 
 from vlocbench.bench.export import estimate_poses, localizations
+from vlocbench.bench.replay import QueryRenderer, episode_camera
 from vlocbench.bench.store import EpisodeRow, StoreError, read_episode_table, read_latest_run
 from vlocbench.bench.towns import route_named, town_named
 from vlocbench.bench.visual import camera_model
-from vlocbench.config import from_dict
 from vlocbench.errors import MachineError
 from vlocbench.geometry import planar_pose
 from vlocbench.interfaces import Array
-from vlocbench.sim.camera import Camera
-from vlocbench.sim.conditions import Conditions
 from vlocbench.sim.town import Town
 
 VIEW_DIR = "view"  # recordings go to OUTPUT/view/KEY.rrd by default
@@ -138,14 +136,11 @@ def _log_town(rr: Any, rec: Any, town: Town, route_xy: Array) -> None:
 
 def _log_localizations(rr: Any, rec: Any, row: EpisodeRow, locs: dict[str, Array],
                        images: bool) -> None:  # fmt: skip
-    setup = row.config["setup"]
-    conditions = from_dict(Conditions, setup["conditions"])
-    vp = conditions.viewpoint
-    camera = from_dict(Camera, setup["cameras"][0]).offset(vp.dz_m, vp.pitch_down_deg)
+    camera = episode_camera(row.config)
     vehicle_from_cam = camera.extrinsics.vehicle_from_cam()
     intrinsics = camera.intrinsics
     focal_px = camera_model(camera).K[0, 0]
-    renderer = _Renderer(row, conditions, camera) if images else None
+    renderer = QueryRenderer(row.config) if images else None
     gallery = _gallery_of(row) if images else None
     world_from_vehicle = estimate_poses(locs, np.arange(len(locs["time_s"])))
     for k, t in enumerate(locs["time_s"]):
@@ -200,26 +195,3 @@ def _gallery_of(row: EpisodeRow) -> Any:
 
     map_dir = row.config.get("map_dir")
     return Gallery.load(map_info(map_dir)[1]) if map_dir else None
-
-
-class _Renderer:
-    """The episode's camera rendered again at a true pose (the scene without traffic)."""
-
-    def __init__(self, row: EpisodeRow, conditions: Conditions, camera: Camera) -> None:
-        from dataclasses import replace
-
-        from vlocbench.sim import Simulator
-
-        static = replace(
-            conditions, viewpoint=replace(conditions.viewpoint, dz_m=0.0, pitch_down_deg=0.0)
-        )
-        self.sim = Simulator(town_named(row.config["town"]), static)
-        self.camera = camera
-
-    def image(self, x_m: float, y_m: float, yaw_rad: float, time_s: float) -> Array:
-        """The camera's image with the car at (x, y, yaw), the episode's noise at ``time_s``."""
-        self.sim.teleport(float(x_m), float(y_m), float(yaw_rad))
-        return self.sim.render([self.camera], frame_id=round(time_s / self.sim.dt_s))[0].image
-
-    def close(self) -> None:
-        self.sim.close()

@@ -4,27 +4,37 @@ Per episode, in simulated time (the episode starts at 0 s): ``/ground_truth/odom
 ``/ekf/odom`` (``nav_msgs/Odometry`` at every simulation step: the true pose and speed, the EKF's
 pose), ``/wheel_odometry`` (``geometry_msgs/TwistWithCovarianceStamped``: the noisy reading the
 EKF got for each step, with the noise model's variances), ``/visual_pose_estimate``
-(``geometry_msgs/PoseWithCovarianceStamped``, each answer of the localizer, written when it
-reached the EKF and stamped with its image's time, covariance the paper's 0.1) and ``/visual_pose_truth`` (the true pose at those image times). evo (``evo_ape bag2``),
-Foxglove and rviz read them.
+(``geometry_msgs/PoseWithCovarianceStamped``: each answer of the localizer in 6-DoF, written
+when it reached the EKF and stamped with its image's time, with the covariance the EKF gave it:
+x, y and yaw from the episode's ``ekf`` config, the paper's 0.1) and ``/visual_pose_truth`` (the
+true pose at those image times). With ``images``, every query (answered or not) as
+``/CAMERA/image/compressed`` (``sensor_msgs/CompressedImage``, JPEG, stamped and written at its
+image's time) and ``/CAMERA/camera_info``, rendered again from the true pose
+(:mod:`vlocbench.bench.replay`: traffic is not replayed). evo (``evo_ape bag2``), Foxglove and rviz
+read them.
 """
 
 from __future__ import annotations
 
+import shutil
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
-from vlocbench.bench.store import read_episode_table, read_latest_run
+from vlocbench.bench.export import estimate_poses, localizations, vehicle_poses
+from vlocbench.bench.replay import QueryRenderer
+from vlocbench.bench.store import EpisodeRow, read_episode_table, read_latest_run
+from vlocbench.bench.visual import camera_model
 from vlocbench.config import from_dict
 from vlocbench.geometry import planar_pose, quaternion_from_rotation
-from vlocbench.nav import OdometryNoise
+from vlocbench.interfaces import Array
+from vlocbench.nav import EkfConfig, OdometryNoise
 from vlocbench.ros.messages import sec_nanosec
 
-POSE_VARIANCE = 0.1  # the paper's localization node's fixed covariance
+JPEG_QUALITY = 90
 _TS = get_typestore(Stores.ROS2_KILTED)
 _T = _TS.types
 
@@ -34,12 +44,17 @@ def _stamp(t_s: float) -> Any:
     return _T["builtin_interfaces/msg/Time"](sec=sec, nanosec=nanosec)
 
 
-def _pose(x_m: float, y_m: float, yaw_rad: float) -> Any:
-    qx, qy, qz, qw = quaternion_from_rotation(planar_pose(x_m, y_m, yaw_rad)[:3, :3])
+def _pose(world_from_base: Array) -> Any:
+    qx, qy, qz, qw = quaternion_from_rotation(world_from_base[:3, :3])
+    x, y, z = (float(v) for v in world_from_base[:3, 3])
     return _T["geometry_msgs/msg/Pose"](
-        position=_T["geometry_msgs/msg/Point"](x=x_m, y=y_m, z=0.0),
+        position=_T["geometry_msgs/msg/Point"](x=x, y=y, z=z),
         orientation=_T["geometry_msgs/msg/Quaternion"](x=qx, y=qy, z=qz, w=qw),
     )
+
+
+def _planar(x_m: float, y_m: float, yaw_rad: float) -> Any:
+    return _pose(planar_pose(x_m, y_m, yaw_rad))
 
 
 def _odometry(t_s: float, pose: Any, speed_mps: float, child: str) -> Any:
@@ -57,13 +72,49 @@ def _odometry(t_s: float, pose: Any, speed_mps: float, child: str) -> Any:
     )
 
 
-def _pose_stamped(t_s: float, pose: Any, variance: float) -> Any:
+def _pose_stamped(t_s: float, pose: Any, covariance: Array) -> Any:
+    """``covariance`` (6, 6) over x, y, z, roll, pitch, yaw."""
     return _T["geometry_msgs/msg/PoseWithCovarianceStamped"](
         header=_T["std_msgs/msg/Header"](stamp=_stamp(t_s), frame_id="map"),
-        pose=_T["geometry_msgs/msg/PoseWithCovariance"](
-            pose=pose, covariance=(np.eye(6) * variance).ravel()
-        ),
+        pose=_T["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=covariance.ravel()),
     )
+
+
+def _fused_covariance(ekf: EkfConfig) -> Array:
+    """(6, 6): the EKF's x, y, yaw variances of a pose measurement; z, roll, pitch unused (0)."""
+    covariance = np.zeros((6, 6))
+    covariance[[0, 1, 5], [0, 1, 5]] = np.diag(ekf.pose_covariance())
+    return covariance
+
+
+def _image_messages(config: dict[str, Any], locs: dict[str, Array]) -> list[tuple[float, str, Any]]:
+    """Each query's image (JPEG) and camera info at its image time, rendered again."""
+    import cv2
+
+    messages: list[tuple[float, str, Any]] = []
+    with QueryRenderer(config) as renderer:
+        name = renderer.camera.name
+        model = camera_model(renderer.camera)
+        K = np.asarray(model.K, np.float64)
+        for k, t in enumerate(locs["time_s"]):
+            truth = (locs["true_x_m"][k], locs["true_y_m"][k], locs["true_yaw_rad"][k])
+            bgr = cv2.cvtColor(renderer.image(*truth, float(t)), cv2.COLOR_RGB2BGR)
+            ok, jpeg = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])
+            assert ok, "OpenCV could not encode a JPEG"
+            header = _T["std_msgs/msg/Header"](stamp=_stamp(t), frame_id=name)
+            image = _T["sensor_msgs/msg/CompressedImage"](
+                header=header, format="rgb8; jpeg compressed bgr8", data=jpeg.ravel()
+            )
+            info = _T["sensor_msgs/msg/CameraInfo"](
+                header=header, height=model.height, width=model.width,
+                distortion_model="plumb_bob", d=np.zeros(5), k=K.ravel(), r=np.eye(3).ravel(),
+                p=np.hstack([K, np.zeros((3, 1))]).ravel(),
+                binning_x=0, binning_y=0, roi=_T["sensor_msgs/msg/RegionOfInterest"](
+                    x_offset=0, y_offset=0, height=0, width=0, do_rectify=False
+                ),
+            )  # fmt: skip
+            messages += [(t, f"/{name}/image/compressed", image), (t, f"/{name}/camera_info", info)]
+    return messages
 
 
 def _wheel(t_s: float, speed_mps: float, yaw_rate_radps: float, noise: OdometryNoise) -> Any:
@@ -83,59 +134,71 @@ def _wheel(t_s: float, speed_mps: float, yaw_rate_radps: float, noise: OdometryN
     )
 
 
-def write_episode_bag(output_dir: str | Path, key: str, path: Path,
-                      noise: OdometryNoise | None = None) -> Path:  # fmt: skip
-    """The episode ``key`` stored in ``output_dir`` as a rosbag2 folder (one MCAP file) at
-    ``path``; ``noise``: the episode's odometry model (its variances go with the readings)."""
-    noise = noise or OdometryNoise()
-    tr = read_episode_table(output_dir, key, "trajectory")
-    locs = read_episode_table(output_dir, key, "localizations")
-    writer = Writer(path, version=9, storage_plugin=StoragePlugin.MCAP)
-    with writer:
-        topics = {
-            "/ground_truth/odom": "nav_msgs/msg/Odometry",
-            "/ekf/odom": "nav_msgs/msg/Odometry",
-            "/wheel_odometry": "geometry_msgs/msg/TwistWithCovarianceStamped",
-            "/visual_pose_estimate": "geometry_msgs/msg/PoseWithCovarianceStamped",
-            "/visual_pose_truth": "geometry_msgs/msg/PoseWithCovarianceStamped",
-        }
-        conn = {t: writer.add_connection(t, m, typestore=_TS) for t, m in topics.items()}
-        messages: list[tuple[float, str, Any]] = []
-        for k, t in enumerate(tr["time_s"]):
-            truth = _pose(tr["true_x_m"][k], tr["true_y_m"][k], tr["true_yaw_rad"][k])
-            ekf = _pose(tr["ekf_x_m"][k], tr["ekf_y_m"][k], tr["ekf_yaw_rad"][k])
-            messages.append(
-                (t, "/ground_truth/odom", _odometry(t, truth, tr["speed_mps"][k], "base_link"))
-            )
-            messages.append((t, "/ekf/odom", _odometry(t, ekf, tr["speed_mps"][k], "base_link")))
-            speed = tr.get("odometry_speed_mps")  # episodes stored before it have none
-            if speed is not None and np.isfinite(speed[k]):
-                reading = _wheel(t, speed[k], tr["odometry_yaw_rate_radps"][k], noise)
-                messages.append((t, "/wheel_odometry", reading))
-        for k, t in enumerate(locs.get("time_s", [])):
-            if not locs["success"][k]:
-                continue
-            estimate = _pose(locs["x_m"][k], locs["y_m"][k], locs["yaw_rad"][k])
-            truth = _pose(locs["true_x_m"][k], locs["true_y_m"][k], locs["true_yaw_rad"][k])
+def write_episode_bag(output_dir: str | Path, row: EpisodeRow, path: Path,
+                      images: bool = False) -> Path:  # fmt: skip
+    """The finished episode ``row`` stored in ``output_dir`` as a rosbag2 folder (one MCAP file)
+    at ``path``, written whole or not at all; ``images``: with the query images."""
+    episode = row.config.get("episode", {})
+    noise = from_dict(OdometryNoise, episode.get("odometry", {}))
+    fused = _fused_covariance(from_dict(EkfConfig, episode.get("ekf", {})))
+    tr = read_episode_table(output_dir, row.key, "trajectory")
+    locs = localizations(output_dir, row.key)
+    messages: list[tuple[float, str, Any]] = []
+    true = vehicle_poses(tr["true_x_m"], tr["true_y_m"], tr["true_yaw_rad"])
+    ekf = vehicle_poses(tr["ekf_x_m"], tr["ekf_y_m"], tr["ekf_yaw_rad"])
+    for k, t in enumerate(tr["time_s"]):
+        speed_mps = tr["speed_mps"][k]
+        messages.append(
+            (t, "/ground_truth/odom", _odometry(t, _pose(true[k]), speed_mps, "base_link"))
+        )
+        messages.append((t, "/ekf/odom", _odometry(t, _pose(ekf[k]), speed_mps, "base_link")))
+        speed = tr.get("odometry_speed_mps")  # episodes stored before it have none
+        if speed is not None and np.isfinite(speed[k]):
+            reading = _wheel(t, speed[k], tr["odometry_yaw_rate_radps"][k], noise)
+            messages.append((t, "/wheel_odometry", reading))
+    if locs:
+        answered = np.flatnonzero(locs["success"])
+        for k, estimate in zip(answered, estimate_poses(locs, answered), strict=True):
+            t = locs["time_s"][k]
+            truth = _planar(locs["true_x_m"][k], locs["true_y_m"][k], locs["true_yaw_rad"][k])
             arrival = t + locs["latency_s"][k]
             messages.append(
-                (arrival, "/visual_pose_estimate", _pose_stamped(t, estimate, POSE_VARIANCE))
+                (arrival, "/visual_pose_estimate", _pose_stamped(t, _pose(estimate), fused))
             )
-            messages.append((arrival, "/visual_pose_truth", _pose_stamped(t, truth, 0.0)))
+            messages.append(
+                (arrival, "/visual_pose_truth", _pose_stamped(t, truth, np.zeros((6, 6))))
+            )
+        if images:
+            messages += _image_messages(row.config, locs)
+    partial = path.with_name(path.name + ".partial")
+    shutil.rmtree(partial, ignore_errors=True)
+    with Writer(partial, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        conn = {
+            topic: writer.add_connection(topic, msg.__msgtype__, typestore=_TS)
+            for topic, msg in {m[1]: m[2] for m in messages}.items()
+        }
         for t, topic, msg in sorted(messages, key=lambda m: m[0]):
-            writer.write(conn[topic], round(t * 1e9), _TS.serialize_cdr(msg, topics[topic]))
+            writer.write(conn[topic], round(t * 1e9), _TS.serialize_cdr(msg, msg.__msgtype__))
+    shutil.rmtree(path, ignore_errors=True)
+    partial.rename(path)
     return path
 
 
-def export_bags(output_dir: str | Path) -> list[Path]:
+def _has_images(bag: Path) -> bool:
+    with Reader(bag) as reader:
+        return any(c.topic.endswith("/image/compressed") for c in reader.connections)
+
+
+def export_bags(output_dir: str | Path, images: bool = False) -> list[Path]:
     """Every finished episode of the latest run in ``output_dir`` as ``OUTPUT/bags/KEY`` (bags
-    already there are kept); returns the bags written."""
+    already there are kept, unless ``images`` asks for what they lack); returns the bags
+    written."""
     _, rows = read_latest_run(output_dir)
     out = Path(output_dir) / "bags"
     out.mkdir(parents=True, exist_ok=True)
-    return [
-        write_episode_bag(output_dir, row.key, out / row.key,
-                          from_dict(OdometryNoise, row.config.get("episode", {}).get("odometry", {})))
-        for row in rows
-        if row.status == "ok" and not (out / row.key).exists()
+    todo = [
+        row for row in rows
+        if row.status == "ok"
+        and not ((out / row.key).exists() and (not images or _has_images(out / row.key)))
     ]  # fmt: skip
+    return [write_episode_bag(output_dir, row, out / row.key, images) for row in todo]
