@@ -105,6 +105,35 @@ def test_xfeat_and_lighterglue_match_offline_and_agree_with_the_true_geometry(of
     assert np.median(distance_px) < 1.5 and np.mean(distance_px < 3.0) > 0.8
 
 
+def test_batched_lighterglue_gives_each_pair_its_own_matches(offline, gallery):
+    """Pairs grouped by keypoint counts come back in order, each as matched alone: one pass per
+    batch where LightGlue prunes no points (as on a GPU), one pair at a time where it does."""
+    from vlocbench.loc.features import Features
+    from vlocbench.loc.learned import LightGlueMatcher
+    from vlocbench.loc.matchers import match_pairs
+    from vlocbench.loc.registry import build_features
+
+    extractor = build_features("xfeat")
+    f = [extractor.extract(gallery.load_image(gallery.names[k])) for k in (10, 11, 12, 13)]
+    cut = f[2].subset(np.arange(300))  # another keypoint count: its own batch
+    pairs = [(f[0], f[1]), (f[1], f[2]), (cut, f[3]), (f[2], f[3]), (f[0], Features.empty(64))]
+    matcher = LightGlueMatcher(features="xfeat", batch_size=2)
+    assert not matcher._one_pass(1024)  # the CPU prunes points: pairs one at a time
+    alone = [matcher.match(a, b) for a, b in pairs]
+    assert all(
+        np.array_equal(x, y) for x, y in zip(alone, match_pairs(matcher, pairs), strict=True)
+    )
+    # without pruning and early stopping a batch is one pass and each pair's result its own
+    matcher.net.conf.width_confidence = matcher.net.conf.depth_confidence = -1
+    assert matcher._one_pass(1024)
+    alone = [matcher.match(a, b) for a, b in pairs]
+    batched = match_pairs(matcher, pairs)
+    assert min(len(m) for m in alone[:4]) > 50 and batched[4].shape == (0, 2)
+    for x, y in zip(alone, batched, strict=True):
+        same = {tuple(r) for r in x} & {tuple(r) for r in y}
+        assert len(same) >= 0.98 * max(len(x), len(y))  # floating point's order of sums only
+
+
 def test_the_device_is_auto_cpu_or_cuda(monkeypatch):
     from vlocbench.errors import ConfigError, UnknownNameError
     from vlocbench.loc.learned import EfficientNetGem, resolve_device

@@ -217,8 +217,16 @@ def prepare_maps(plan: ExperimentPlan, progress: bool = False) -> dict[tuple[str
     return out
 
 
-def _prepare_town(plan: ExperimentPlan, town_name: str, cache: Path,
-                  bars: _StageBars) -> dict[tuple[str, str], str]:  # fmt: skip
+def prepare_gallery(plan: ExperimentPlan, town_name: str, progress: bool = False) -> Gallery:
+    """The gallery of ``town_name`` as the experiment captures it, captured unless cached."""
+    bars = _StageBars(progress)
+    try:
+        return _gallery(plan, town_name, Path(plan.spec.cache).resolve(), bars)
+    finally:
+        bars.close()
+
+
+def _gallery(plan: ExperimentPlan, town_name: str, cache: Path, bars: _StageBars) -> Gallery:
     spec, town = plan.spec, town_named(town_name)
     gallery_dir = cache / "galleries" / f"{town.name}-{plan.gallery_key(town_name)}"
     if not (gallery_dir / GALLERY_FILE).exists():
@@ -231,7 +239,13 @@ def _prepare_town(plan: ExperimentPlan, town_name: str, cache: Path,
                             spec.gallery.spacing_m, spec.gallery.speed_mps,
                             progress=lambda n: bars(f"{town.name} gallery", n, shots))  # fmt: skip
         logger.info(f"{town.name}: gallery captured in {time.perf_counter() - t:.0f} s")
-    gallery = Gallery.load(gallery_dir)
+    return Gallery.load(gallery_dir)
+
+
+def _prepare_town(plan: ExperimentPlan, town_name: str, cache: Path,
+                  bars: _StageBars) -> dict[tuple[str, str], str]:  # fmt: skip
+    spec, town = plan.spec, town_named(town_name)
+    gallery = _gallery(plan, town_name, cache, bars)
     out = {}
     for method in (m for m in spec.methods if m.needs_map):
         mapping = method.mapping or spec.mapping

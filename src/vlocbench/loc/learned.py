@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from vlocbench.config import require
 from vlocbench.errors import ConfigError, UnknownNameError
 from vlocbench.loc.features import Features, check_image
 
@@ -176,10 +177,12 @@ class LightGlueMatcher:
     """
 
     def __init__(self, features: str = "aliked", filter_threshold: float = 0.1,
-                 device: str = "auto", name: str = "lightglue") -> None:  # fmt: skip
+                 device: str = "auto", batch_size: int = 16, name: str = "lightglue") -> None:  # fmt: skip
         import kornia.feature as KF
 
         self.device = resolve_device(device)
+        require(batch_size >= 1, "matcher.batch_size", "must be >= 1")
+        self.batch_size = batch_size  # pairs per forward pass in match_many
         if features not in _MATCHER_WEIGHTS:
             raise UnknownNameError("matcher.features", features, _MATCHER_WEIGHTS)
         self.name = name
@@ -207,23 +210,51 @@ class LightGlueMatcher:
         self.net = net.eval().to(self.device)
 
     def match(self, a: Features, b: Features) -> NDArray[np.int64]:
-        torch = _torch()
-        if len(a) < 2 or len(b) < 2:
-            return np.zeros((0, 2), np.int64)
-        size = np.maximum(a.keypoints.max(0), b.keypoints.max(0)) + 1
+        return self.match_many([(a, b)])[0]
 
-        def side(f: Features) -> dict:
+    def match_many(self, pairs: Sequence[tuple[Features, Features]]) -> list[NDArray[np.int64]]:
+        """:meth:`match` of each pair; pairs with equal keypoint counts go ``batch_size`` to a
+        forward pass. On a GPU, up to 1024 keypoints (where LightGlue prunes no points), a batch
+        is one pass that stops early only when every pair is confident, so a pair can run more
+        layers than alone. Where LightGlue prunes points (always on the CPU) kornia would run a
+        batch's pairs one at a time anyway, so they go one at a time (batching without pruning
+        is slower per pair on a CPU: ``benchmarks/bench_matching.py``)."""
+        torch = _torch()
+        out = [np.zeros((0, 2), np.int64) for _ in pairs]
+        groups: dict[tuple[int, int], list[int]] = {}
+        for k, (a, b) in enumerate(pairs):
+            if len(a) >= 2 and len(b) >= 2:
+                groups.setdefault((len(a), len(b)), []).append(k)
+
+        def side(fs: list[Features], sizes: NDArray) -> dict:
             return {
-                "keypoints": torch.from_numpy(f.keypoints)[None].to(self.device),
-                "descriptors": torch.from_numpy(f.descriptors)[None].to(self.device),
-                "image_size": torch.tensor(size, dtype=torch.float32)[None].to(self.device),
+                "keypoints": torch.from_numpy(np.stack([f.keypoints for f in fs])).to(self.device),
+                "descriptors": torch.from_numpy(np.stack([f.descriptors for f in fs])).to(
+                    self.device
+                ),
+                "image_size": torch.from_numpy(sizes).to(self.device),
             }
 
-        with _LOCK, torch.inference_mode():
-            out = self.net({"image0": side(a), "image1": side(b)})
-        m0 = out["matches0"][0].cpu().numpy()
-        keep = np.flatnonzero(m0 >= 0)
-        return np.stack([keep, m0[keep]], axis=1).astype(np.int64)
+        for (n_a, n_b), members in groups.items():
+            step = self.batch_size if self._one_pass(max(n_a, n_b)) else 1
+            for start in range(0, len(members), step):
+                batch = members[start : start + step]
+                a_s, b_s = [pairs[k][0] for k in batch], [pairs[k][1] for k in batch]
+                sizes = np.stack([
+                    np.maximum(a.keypoints.max(0), b.keypoints.max(0)) + 1 for a, b in zip(a_s, b_s)
+                ]).astype(np.float32)  # fmt: skip
+                with _LOCK, torch.inference_mode():
+                    result = self.net({"image0": side(a_s, sizes), "image1": side(b_s, sizes)})
+                for k, m0 in zip(batch, result["matches0"].cpu().numpy(), strict=True):
+                    keep = np.flatnonzero(m0 >= 0)
+                    out[k] = np.stack([keep, m0[keep]], axis=1).astype(np.int64)
+        return out
+
+    def _one_pass(self, keypoints: int) -> bool:
+        """Whether kornia runs a batch of pairs with up to ``keypoints`` as one forward pass."""
+        torch = _torch()
+        pruning = self.net.conf.width_confidence > 0
+        return not pruning or keypoints <= self.net.pruning_min_kpts(torch.device(self.device))
 
 
 class EfficientNetGem:

@@ -32,6 +32,7 @@ from vlocbench.errors import LocalizationError
 from vlocbench.geometry import invert_pose
 from vlocbench.loc.features import Features
 from vlocbench.loc.gallery import CameraModel, Gallery, GalleryWriter
+from vlocbench.loc.matchers import match_pairs
 from vlocbench.loc.registry import (
     MethodConf,
     build_features,
@@ -42,6 +43,7 @@ from vlocbench.loc.registry import (
 from vlocbench.loc.retrieval import nearest_poses, top_k
 
 MAP_FILE = "map.json"
+MATCH_CHUNK = 64  # pairs matched between writes to the cache (what a kill can lose)
 Progress = Callable[[str, int, int], None]  # stage, done, total
 
 
@@ -237,15 +239,16 @@ def _pairs(
 
 def _match(gallery: Gallery, conf: MethodConf, mapping: MappingConfig, features: FeatureStore,
            pairs: list[tuple[str, str]], path: Path, progress: Progress | None) -> dict[tuple[str, str], np.ndarray]:  # fmt: skip
+    """Matches of each pair that agree with the known poses, cached in ``path`` a chunk of
+    ``MATCH_CHUNK`` pairs at a time (a batched matcher gets a chunk at once)."""
     matcher = None
-    out: dict[tuple[str, str], np.ndarray] = {}
     with _writable_cache(path) as f, features.reading() as read:
-        for k, (a, b) in enumerate(pairs):
-            key = _pair_key(a, b)
-            if key not in f:
-                matcher = matcher or build_matcher(conf.matcher)
-                fa, fb = read(a), read(b)
-                m = matcher.match(fa, fb)
+        todo = [(a, b) for a, b in pairs if _pair_key(a, b) not in f]
+        for start in range(0, len(todo), MATCH_CHUNK):
+            chunk = todo[start : start + MATCH_CHUNK]
+            matcher = matcher or build_matcher(conf.matcher)
+            feats = [(read(a), read(b)) for a, b in chunk]
+            for (a, b), (fa, fb), m in zip(chunk, feats, match_pairs(matcher, feats), strict=True):
                 if len(m):
                     ia, ib = (
                         gallery.images[gallery.index_of(a)],
@@ -257,11 +260,10 @@ def _match(gallery: Gallery, conf: MethodConf, mapping: MappingConfig, features:
                         sampson_px(F, fa.keypoints[m[:, 0]], fb.keypoints[m[:, 1]])
                         < mapping.epipolar_max_px
                     ]
-                f[key] = m.astype(np.uint32).reshape(-1, 2)
-                if progress:
-                    progress("matches", k + 1, len(pairs))
-            out[(a, b)] = f[key][()]
-    return out
+                f[_pair_key(a, b)] = m.astype(np.uint32).reshape(-1, 2)
+            if progress:
+                progress("matches", len(pairs) - len(todo) + start + len(chunk), len(pairs))
+        return {(a, b): f[_pair_key(a, b)][()] for a, b in pairs}
 
 
 def posed_model(gallery: Gallery) -> pycolmap.Reconstruction:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Protocol, runtime_checkable
 
 import cv2
@@ -18,6 +19,15 @@ class Matcher(Protocol):
     name: str
 
     def match(self, a: Features, b: Features) -> NDArray[np.int64]: ...
+
+
+def match_pairs(
+    matcher: Matcher, pairs: Sequence[tuple[Features, Features]]
+) -> list[NDArray[np.int64]]:
+    """``matcher.match`` of each pair, through its ``match_many`` where it has one (a batched
+    network)."""
+    many = getattr(matcher, "match_many", None)
+    return list(many(pairs)) if many is not None else [matcher.match(a, b) for a, b in pairs]
 
 
 class MutualNearestNeighbor:
