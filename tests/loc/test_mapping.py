@@ -83,6 +83,9 @@ def test_changing_a_presets_arguments_rekeys_its_maps(gallery, tmp_path, monkeyp
     target, kwargs = registry.FEATURES["sift"]
     monkeypatch.setitem(registry.FEATURES, "sift", (target, {**kwargs, "contrast_threshold": 0.04}))
     assert default_map_dir(tmp_path, gallery, "sift", sift, MappingConfig()) != before
+    monkeypatch.setitem(registry.REVISIONS, "nn-ratio", registry.REVISIONS["nn-ratio"] + 1)
+    again = default_map_dir(tmp_path, gallery, "sift", sift, MappingConfig())
+    assert again != before and again.parent == before.parent  # a new revision: a new map
 
 
 def test_a_map_build_killed_mid_write_is_finished_by_a_rerun(gallery, tmp_path):

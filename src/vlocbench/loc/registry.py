@@ -37,6 +37,11 @@ MATCHERS: dict[str, tuple[str, dict[str, Any]]] = {
     "lightglue-disk": ("vlocbench.loc.learned:LightGlueMatcher", {"features": "disk"}),
     "lighterglue-xfeat": ("vlocbench.loc.learned:LightGlueMatcher", {"features": "xfeat"}),
 }
+# presets whose implementation changed their results since they were introduced: maps and
+# episodes are keyed by the revision too, so that results of the old code are not reused
+REVISIONS: dict[str, int] = {
+    "nn-ratio": 2,  # 2: L2 distances from a matrix product instead of OpenCV's brute force
+}
 RETRIEVAL: dict[str, tuple[str, dict[str, Any]]] = {
     "vlad": ("vlocbench.loc.retrieval:Vlad", {"clusters": 64}),
     "effnet-gem": ("vlocbench.loc.learned:EfficientNetGem", {}),
@@ -72,10 +77,12 @@ def stage_params(conf: MethodConf) -> dict[str, Any]:
     """What builds each stage of ``conf``: a preset's class and arguments, or a plugin's dotted
     path. Maps and episodes are keyed by it, so that changing a preset's arguments rebuilds them."""
     stages = (("features", FEATURES), ("matcher", MATCHERS), ("retrieval", RETRIEVAL))
-    return {
-        stage: list(presets.get(getattr(conf, stage), (getattr(conf, stage), {})))
-        for stage, presets in stages
-    }
+    params = {}
+    for stage, presets in stages:
+        name = getattr(conf, stage)
+        revision = [REVISIONS[name]] if name in REVISIONS else []
+        params[stage] = [*presets.get(name, (name, {})), *revision]
+    return params
 
 
 def method_conf(name: str) -> MethodConf:
