@@ -81,7 +81,7 @@ def test_changing_a_presets_arguments_rekeys_its_maps(gallery, tmp_path, monkeyp
     sift = method_conf("sift")
     before = default_map_dir(tmp_path, gallery, "sift", sift, MappingConfig())
     target, kwargs = registry.FEATURES["sift"]
-    monkeypatch.setitem(registry.FEATURES, "sift", (target, {**kwargs, "contrast_threshold": 0.04}))
+    monkeypatch.setitem(registry.FEATURES, "sift", (target, {**kwargs, "peak_threshold": 0.02}))
     assert default_map_dir(tmp_path, gallery, "sift", sift, MappingConfig()) != before
     monkeypatch.setitem(registry.REVISIONS, "nn-ratio", registry.REVISIONS["nn-ratio"] + 1)
     again = default_map_dir(tmp_path, gallery, "sift", sift, MappingConfig())

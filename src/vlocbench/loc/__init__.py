@@ -7,7 +7,13 @@ dotted path of a user's class. Imports neither ``sim`` nor ``nav``; PyTorch is i
 learned presets (:mod:`vlocbench.loc.learned`), when one is used.
 """
 
-from vlocbench.loc.features import FeatureExtractor, Features, OrbTeblidExtractor, SiftExtractor
+from vlocbench.loc.features import (
+    DogSiftExtractor,
+    FeatureExtractor,
+    Features,
+    OrbTeblidExtractor,
+    SiftExtractor,
+)
 from vlocbench.loc.gallery import CameraModel, Gallery, GalleryImage, GalleryWriter
 from vlocbench.loc.localizer import LocalizerConfig, MapLocalizer, QueryResult, RigResult
 from vlocbench.loc.mapping import MappingConfig, MapReport, build_map, default_map_dir
@@ -17,6 +23,7 @@ from vlocbench.loc.retrieval import GlobalDescriptor, Vlad
 
 __all__ = [
     "CameraModel",
+    "DogSiftExtractor",
     "FeatureExtractor",
     "Features",
     "Gallery",

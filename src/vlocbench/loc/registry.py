@@ -20,8 +20,13 @@ from vlocbench.loc.retrieval import GlobalDescriptor
 POSE_PRIOR = "pose-prior"  # retrieval by the prior pose: no global descriptor
 
 FEATURES: dict[str, tuple[str, dict[str, Any]]] = {
-    # hloc's DoG (the paper's SIFT): peak threshold 0.01, i.e. OpenCV's contrast threshold 0.03
+    # the paper's SIFT: hloc's DoG (COLMAP's VLFeat SIFT through pycolmap), peak threshold 0.01
     "sift": (
+        "vlocbench.loc.features:DogSiftExtractor",
+        {"peak_threshold": 0.01, "first_octave": 0},
+    ),
+    # OpenCV's SIFT (an octave finer, about twice the keypoints), the strongest 2048
+    "opencv-sift": (
         "vlocbench.loc.features:SiftExtractor",
         {"max_keypoints": 2048, "contrast_threshold": 0.03},
     ),
