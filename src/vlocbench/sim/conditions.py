@@ -141,13 +141,13 @@ class Exposure:
     meters the daylight and opens up by up to ``max_gain`` (its exposure range: 2^16, wider than
     the paper's darkest level needs) to keep the brightness of noon. ``fixed``: gain 1, so dim
     scenes are dark. Sensor noise grows with the gain: photon shot noise (variance ``shot_noise``
-    x gain per grey level: at noon about 3,200 photo-electrons at mid-grey, an SNR of 57) and read
+    x gain per grey level: at noon about 2,100 photo-electrons at grey level 64, an SNR of 46) and read
     noise (``read_noise`` x gain grey levels). Calibrated against the paper's recall at each k:
     see ``vlocbench.sim.light`` and ``benchmarks/bench_illumination.py``."""
 
     mode: Literal["auto", "fixed"] = "auto"
     max_gain: float = 65536.0
-    shot_noise: float = 0.02
+    shot_noise: float = 0.03
     read_noise: float = 0.0
 
     def __post_init__(self) -> None:
