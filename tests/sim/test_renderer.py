@@ -100,7 +100,9 @@ def test_paper_fog_starts_at_the_visual_range(small_sim):
     assert np.abs(starts[near] - clear[near]).mean() < 1.0
     assert np.abs(exponential[near] - clear[near]).mean() > 10.0
     far = (slice(95, 118), slice(0, 150))  # the far end of the street, beyond 15 m
-    assert clear[far].std() > 10.0 and starts[far].std() < 2.0  # uniform fog
+    fog_grey = starts[far].mean()
+    sensor_noise = np.sqrt(Exposure().shot_noise * fog_grey)  # shot noise at gain 1
+    assert clear[far].std() > 10.0 and starts[far].std() < 1.2 * sensor_noise  # uniform fog
 
 
 def test_winter_differs_from_summer(small_sim):
