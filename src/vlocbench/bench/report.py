@@ -222,10 +222,20 @@ def _paper_level(factor: str, value: Any) -> Any:
     return None if value is None else float(value)
 
 
-def _paper_table(summary: Summary) -> PaperTable | None:
-    if len(summary.axis) != 1:
+def _one_axis(summary: Summary) -> tuple[str, list[Any]] | None:
+    """The run's one swept key and each setup's value of it (a sweep of one level counts)."""
+    if summary.axis:
+        if len(summary.axis) != 1:
+            return None
+        return summary.axis[0], [s.levels[0][1] for s in summary.setups]
+    if len(summary.spec.sweep) != 1:
         return None
-    key = summary.axis[0]
+    key, value = summary.spec.sweep[0]
+    one = value[0] if isinstance(value, list | tuple) and len(value) == 1 else value
+    return key, [one for _ in summary.setups]
+
+
+def _paper_table(key: str) -> PaperTable | None:
     factor = FACTOR_OF_AXIS.get(key) or FACTOR_OF_AXIS.get(key.split(".")[0])
     return None if factor is None else paper_results().tables[factor]
 
@@ -243,10 +253,11 @@ def _ours(summary: Summary, town: str, method: str) -> tuple[list[float], list[f
 def paper_comparison_tables(summary: Summary) -> list[tuple[str, Table]]:
     """Our failure rates and recall beside the paper's, level by level where the levels match,
     and the shape measures of :mod:`vlocbench.bench.paper` for every method of both."""
-    table = _paper_table(summary)
-    if table is None:
+    axis = _one_axis(summary)
+    table = None if axis is None else _paper_table(axis[0])
+    if axis is None or table is None:
         return []
-    ours_levels = [_paper_level(table.factor, s.levels[0][1]) for s in summary.setups]
+    ours_levels = [_paper_level(table.factor, v) for v in axis[1]]
     out = []
     for town in summary.towns:
         name = summary.town_names[town]
@@ -255,7 +266,8 @@ def paper_comparison_tables(summary: Summary) -> list[tuple[str, Table]]:
         out.append(_paper_failure_table(summary, town, table, ours_levels))
         if table.recall_t1:
             out.append(_paper_recall_table(summary, town, table, ours_levels))
-        out.append(_paper_shape_table(summary, town, table, ours_levels))
+        if len(ours_levels) > 1:  # shapes need an axis
+            out.append(_paper_shape_table(summary, town, table, ours_levels))
     return out
 
 
