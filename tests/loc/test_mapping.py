@@ -99,6 +99,10 @@ def test_a_map_build_killed_mid_write_is_finished_by_a_rerun(gallery, tmp_path):
             (out / cache).write_bytes(b"\x89HDF\r\n\x1a\n" + b"\0" * 64)
     again = build_map(gallery, method_conf("sift-vlad"), out)
     assert again.points == first.points and again.images == first.images
+    # a finished map's folder keeps its caches to itself: another method is refused at once
+    with pytest.raises(LocalizationError, match="another method, stages"):
+        build_map(gallery, method_conf("orb-teblid"), out)
+    assert json.loads((out / "map.json").read_text())["stages"]["features"][0].endswith("Extractor")
 
 
 def test_a_gallery_goes_to_colmap_and_back_unchanged(gallery, tmp_path):

@@ -22,6 +22,7 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+from typing import Any
 
 import h5py
 import numpy as np
@@ -280,6 +281,31 @@ def posed_model(gallery: Gallery) -> pycolmap.Reconstruction:
     return rec
 
 
+def _identity(gallery: Gallery, conf: MethodConf, mapping: MappingConfig) -> dict[str, Any]:
+    """What a map's cached stages depend on, as its ``map.json`` keeps it (JSON types)."""
+    return json.loads(json.dumps({
+        "gallery_identity": gallery.identity, "method": asdict(conf), "mapping": asdict(mapping),
+        "stages": stage_params(conf),
+    }))  # fmt: skip
+
+
+def _check_same_map(out: Path, identity: dict[str, Any]) -> None:
+    """A folder that holds a finished map of something else is refused: its cached stages
+    would be mixed into this one. (Maps built before ``stages`` was kept are checked without.)"""
+    try:
+        built = json.loads((out / MAP_FILE).read_text())
+    except FileNotFoundError:
+        return
+    except json.JSONDecodeError as exc:
+        raise LocalizationError(f"{out / MAP_FILE} is corrupt: {exc!r}") from None
+    differ = [k for k, v in identity.items() if k in built and built[k] != v]
+    if differ:
+        raise LocalizationError(
+            f"{out} holds a map built with another {', '.join(differ)} ({built.get('method')}); "
+            "build in another folder, or pass overwrite (--overwrite) to rebuild it"
+        )
+
+
 def map_info(map_dir: str | Path) -> tuple[MethodConf, Path]:
     """(method, gallery folder) a map was built with, from its ``map.json``."""
     path = Path(map_dir) / MAP_FILE
@@ -388,6 +414,9 @@ def build_map(
     """Build (or finish building) the map of ``gallery`` with method ``conf`` in ``out_dir``."""
     mapping = mapping or MappingConfig()
     out = Path(out_dir)
+    identity = _identity(gallery, conf, mapping)
+    if not overwrite:
+        _check_same_map(out, identity)
     out.mkdir(parents=True, exist_ok=True)
     pycolmap.logging.minloglevel = 2
     seconds = {}
@@ -419,9 +448,7 @@ def build_map(
     info = {
         "version": 1,
         "gallery": str(gallery.root.resolve()),
-        "gallery_identity": gallery.identity,
-        "method": asdict(conf),
-        "mapping": asdict(mapping),
+        **identity,
         "report": asdict(report),
     }
     tmp = out / (MAP_FILE + ".tmp")
