@@ -39,7 +39,7 @@ class MutualNearestNeighbor:
     """
 
     def __init__(self, ratio: float = 0.8, hamming: bool = False, name: str = "nn-ratio") -> None:
-        self.name, self.ratio, self.hamming = name, ratio, hamming
+        self.name, self.ratio = name, ratio
         self._bf = cv2.BFMatcher(cv2.NORM_HAMMING) if hamming else None
 
     def match(self, a: Features, b: Features) -> NDArray[np.int64]:
