@@ -5,8 +5,8 @@ Per episode, in simulated time (the episode starts at 0 s): ``/ground_truth/odom
 pose), ``/wheel_odometry`` (``geometry_msgs/TwistWithCovarianceStamped``: the noisy reading the
 EKF got for each step, with the noise model's variances), ``/visual_pose_estimate``
 (``geometry_msgs/PoseWithCovarianceStamped``: each answer of the localizer in 6-DoF, written
-when it reached the EKF and stamped with its image's time, with the covariance the EKF gave it:
-x, y and yaw from the episode's ``ekf`` config, the paper's 0.1) and ``/visual_pose_truth`` (the
+when it reached the EKF and stamped with its image's time, with the covariance the EKF gives an
+answer without its own: x, y and yaw from the episode's ``ekf`` config, the paper's 0.1) and ``/visual_pose_truth`` (the
 true pose at those image times). With ``images``, every query (answered or not) as
 ``/CAMERA/image/compressed`` (``sensor_msgs/CompressedImage``, JPEG, stamped and written at its
 image's time) and ``/CAMERA/camera_info``, rendered again from the true pose
@@ -29,7 +29,7 @@ from vlocbench.bench.replay import QueryRenderer
 from vlocbench.bench.store import EpisodeRow, read_episode_table, read_latest_run
 from vlocbench.bench.visual import camera_model
 from vlocbench.config import from_dict
-from vlocbench.geometry import planar_pose, quaternion_from_rotation
+from vlocbench.geometry import quaternion_from_rotation
 from vlocbench.interfaces import Array
 from vlocbench.nav import EkfConfig, OdometryNoise
 from vlocbench.ros.messages import sec_nanosec
@@ -51,10 +51,6 @@ def _pose(world_from_base: Array) -> Any:
         position=_T["geometry_msgs/msg/Point"](x=x, y=y, z=z),
         orientation=_T["geometry_msgs/msg/Quaternion"](x=qx, y=qy, z=qz, w=qw),
     )
-
-
-def _planar(x_m: float, y_m: float, yaw_rad: float) -> Any:
-    return _pose(planar_pose(x_m, y_m, yaw_rad))
 
 
 def _odometry(t_s: float, pose: Any, speed_mps: float, child: str) -> Any:
@@ -81,7 +77,8 @@ def _pose_stamped(t_s: float, pose: Any, covariance: Array) -> Any:
 
 
 def _fused_covariance(ekf: EkfConfig) -> Array:
-    """(6, 6): the EKF's x, y, yaw variances of a pose measurement; z, roll, pitch unused (0)."""
+    """(6, 6): the x, y, yaw variances the EKF gives an answer without a covariance of its own
+    (every visual method's; a localizer's own covariance is not stored); z, roll, pitch 0."""
     covariance = np.zeros((6, 6))
     covariance[[0, 1, 5], [0, 1, 5]] = np.diag(ekf.pose_covariance())
     return covariance
@@ -146,27 +143,31 @@ def write_episode_bag(output_dir: str | Path, row: EpisodeRow, path: Path,
     messages: list[tuple[float, str, Any]] = []
     true = vehicle_poses(tr["true_x_m"], tr["true_y_m"], tr["true_yaw_rad"])
     ekf = vehicle_poses(tr["ekf_x_m"], tr["ekf_y_m"], tr["ekf_yaw_rad"])
+    speed = tr.get("odometry_speed_mps")  # episodes stored before it have none
     for k, t in enumerate(tr["time_s"]):
         speed_mps = tr["speed_mps"][k]
         messages.append(
             (t, "/ground_truth/odom", _odometry(t, _pose(true[k]), speed_mps, "base_link"))
         )
         messages.append((t, "/ekf/odom", _odometry(t, _pose(ekf[k]), speed_mps, "base_link")))
-        speed = tr.get("odometry_speed_mps")  # episodes stored before it have none
         if speed is not None and np.isfinite(speed[k]):
             reading = _wheel(t, speed[k], tr["odometry_yaw_rate_radps"][k], noise)
             messages.append((t, "/wheel_odometry", reading))
     if locs:
         answered = np.flatnonzero(locs["success"])
-        for k, estimate in zip(answered, estimate_poses(locs, answered), strict=True):
+        truths = vehicle_poses(
+            *(locs[c][answered] for c in ("true_x_m", "true_y_m", "true_yaw_rad"))
+        )
+        for k, estimate, truth in zip(
+            answered, estimate_poses(locs, answered), truths, strict=True
+        ):
             t = locs["time_s"][k]
-            truth = _planar(locs["true_x_m"][k], locs["true_y_m"][k], locs["true_yaw_rad"][k])
             arrival = t + locs["latency_s"][k]
             messages.append(
                 (arrival, "/visual_pose_estimate", _pose_stamped(t, _pose(estimate), fused))
             )
             messages.append(
-                (arrival, "/visual_pose_truth", _pose_stamped(t, truth, np.zeros((6, 6))))
+                (arrival, "/visual_pose_truth", _pose_stamped(t, _pose(truth), np.zeros((6, 6))))
             )
         if images:
             messages += _image_messages(row.config, locs)
