@@ -73,11 +73,13 @@ def _match_two_gallery_images(gallery, features, matcher, i=10, j=11):
 
 
 def test_lightglue_for_features_without_weights_lists_the_valid_ones():
-    from vlocbench.errors import UnknownNameError
+    from vlocbench.errors import ConfigError, UnknownNameError
     from vlocbench.loc.learned import LightGlueMatcher
 
     with pytest.raises(UnknownNameError, match="valid: aliked, disk, xfeat"):
         LightGlueMatcher(features="sift")
+    with pytest.raises(ConfigError, match=r"matcher\.batch_size: must be >= 1"):
+        LightGlueMatcher(features="xfeat", batch_size=0)
 
 
 def test_disk_features_and_lightglue_match_offline(offline, gallery):
