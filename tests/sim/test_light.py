@@ -46,3 +46,16 @@ def test_exposure_gain_and_sensor_noise():
     assert low.std() == pytest.approx(np.sqrt(0.02 * 64), rel=0.15)
     assert high.std() == pytest.approx(np.sqrt(0.02 * 100 * 64), rel=0.1)
     assert np.allclose(low[..., 0], low[..., 1])  # one draw per pixel: grey noise
+
+
+def test_sensor_noise_equals_its_definition_bit_for_bit():
+    """The in-place arithmetic draws and rounds exactly as the formula written out, so renders (and
+    every stored result keyed by them) do not change with it."""
+    image = np.random.default_rng(1).integers(0, 256, (60, 80, 3), dtype=np.uint8)
+    for gain in (1.0, 3.7, 40.0):
+        grey = image.astype(np.float32).mean(axis=2, keepdims=True)
+        sigma = np.sqrt(0.03 * gain * grey + (0.4 * gain) ** 2)
+        draws = np.random.default_rng(2).standard_normal(grey.shape, np.float32)
+        expected = np.clip(image.astype(np.float32) + sigma * draws + 0.5, 0, 255).astype(np.uint8)
+        got = sensor_noise(image, gain, 0.03, 0.4, np.random.default_rng(2))
+        np.testing.assert_array_equal(got, expected)
