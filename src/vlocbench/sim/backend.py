@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import ctypes.util
 import os
+import sys
 
 from vlocbench.errors import RenderBackendError
 
@@ -16,6 +17,8 @@ DEBIAN_PACKAGES = {
     "osmesa": "libosmesa6",
 }
 _LIBRARIES = {"egl": ("EGL", "GL"), "osmesa": ("OSMesa",)}
+# MuJoCo was imported before a backend was chosen: it read no MUJOCO_GL and has no headless context
+_too_late = False
 
 
 def _available(backend: str) -> bool:
@@ -24,8 +27,10 @@ def _available(backend: str) -> bool:
 
 def select_backend() -> str:
     """Set ``MUJOCO_GL`` (and PyOpenGL's platform) if unset; return the backend in use."""
+    global _too_late
     backend = os.environ.get("MUJOCO_GL")
     if backend is None:
+        _too_late = "mujoco" in sys.modules
         backend = "egl" if _available("egl") or not _available("osmesa") else "osmesa"
         os.environ["MUJOCO_GL"] = backend
     if backend in _LIBRARIES:
@@ -34,6 +39,12 @@ def select_backend() -> str:
 
 
 def missing_libraries_error(backend: str, cause: BaseException) -> RenderBackendError:
+    if _too_late:
+        return RenderBackendError(
+            f"cannot start the headless OpenGL backend ({cause}): mujoco was imported before "
+            "vlocbench.sim, with MUJOCO_GL unset, so MuJoCo chose no headless backend. Import "
+            f"vlocbench.sim before mujoco, or set MUJOCO_GL={backend} in the environment"
+        )
     packages = DEBIAN_PACKAGES.get(backend, DEBIAN_PACKAGES["egl"])
     return RenderBackendError(
         f"cannot start the headless OpenGL backend MUJOCO_GL={backend!r} ({cause}). "
