@@ -2,6 +2,12 @@
 overhead (store, scheduling, transfers, idle workers at the end) as a share of episode time.
 
     python benchmarks/bench_runner.py [--workers 1,2] [--repeats 3] [--out out/bench_runner]
+                                      [--one-thread]
+
+One worker runs in the driver process, whose OpenCV, torch and renderer use every core; a pool
+worker uses one thread of each. ``--one-thread`` limits this process as a pool worker is limited,
+so that ``--workers 1 --one-thread`` shows what one pool worker does alone (run it on its own:
+the limits hold for the whole process).
 
 The experiment is fixed: the first 150 m of town10's route, SIFT + VLAD at 800x600, k in
 {0, 3, 6, 9}, one repetition (4 recall, 4 failure and 1 odometry-only episodes). Its gallery and
@@ -12,12 +18,15 @@ map are built once (a warm-up run) and reused; each timed run starts from an emp
 from __future__ import annotations
 
 import argparse
+import os
 import shutil
 import statistics
 from pathlib import Path
 
+import cv2
+
 from vlocbench.bench.experiment import load_experiment
-from vlocbench.bench.runner import run_experiment
+from vlocbench.bench.runner import WORKER_THREADS_ENV, run_experiment
 
 EXPERIMENT = {
     "name": "bench_runner",
@@ -34,7 +43,11 @@ def main() -> None:
     ap.add_argument("--workers", default="1,2")
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--out", type=Path, default=Path("out/bench_runner"))
+    ap.add_argument("--one-thread", action="store_true", help="this process as a pool worker")
     args = ap.parse_args()
+    if args.one_thread:  # before torch and the renderer start, which read these then
+        os.environ.update(WORKER_THREADS_ENV)
+        cv2.setNumThreads(1)
     plan = load_experiment(
         {**EXPERIMENT, "output": str(args.out / "warmup"), "cache": str(args.out / "cache")}
     )
