@@ -7,16 +7,18 @@ import time
 from pathlib import Path
 
 import numpy as np
+import pycolmap
 import pytest
 import yaml
 
 from tests.bench.fakes import CONTROL_ENV, run_fake
 from tests.conftest import small_spec
 from vlocbench.bench.experiment import load_experiment, plan_from_stored
-from vlocbench.bench.runner import execute, run_experiment
+from vlocbench.bench.runner import execute, prepare_maps, run_experiment
 from vlocbench.bench.store import DB_FILE, ResultStore, read_latest_run
 from vlocbench.bench.summary import summarize
 from vlocbench.config import to_dict
+from vlocbench.loc.mapping import MAP_FILE
 
 
 def _fake_tasks():
@@ -267,6 +269,31 @@ def test_experiment_runs_end_to_end_and_resumes(tiny):
             "FROM episodes ORDER BY key"
         ).fetchall()
         assert {k for k, _ in kinds} == {"recall", "failure", "baseline"}
+
+
+def test_galleries_and_maps_made_side_by_side_equal_those_made_in_turn(tiny, tmp_path):
+    """Two towns' galleries, then maps, in two pool workers (one thread each): the tiny run's town,
+    made in turn in the driver with every thread, comes out the same, image for image and point
+    for point."""
+    root, _ = tiny
+    spec = yaml.safe_load((root / "tiny.yaml").read_text())
+    other = tmp_path / "other.yaml"
+    other.write_text(yaml.safe_dump(to_dict(small_spec(seed=4))))
+    spec.update(towns=[spec["towns"][0], str(other)], cache=str(tmp_path / "cache"))
+    maps = prepare_maps(load_experiment(spec), workers=2)
+    assert len(maps) == 2 and all((Path(m) / MAP_FILE).exists() for m in maps.values())
+    side_by_side = Path(maps[(spec["towns"][0], "sift-vlad")])
+    in_turn = root / "cache" / side_by_side.relative_to(tmp_path / "cache")
+    images = sorted((root / "cache" / "galleries").glob("*/images/*"))
+    assert images
+    for image in images:
+        twin = tmp_path / "cache" / image.relative_to(root / "cache")
+        assert image.read_bytes() == twin.read_bytes(), image.name
+    points = [
+        sorted(tuple(p.xyz) for p in pycolmap.Reconstruction(m / "sfm").points3D.values())
+        for m in (side_by_side, in_turn)
+    ]
+    assert points[0] and points[0] == points[1]
 
 
 def test_report_of_a_run(tiny):

@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from vlocbench.bench.episode import run_episode
-from vlocbench.bench.experiment import EpisodeTask, ExperimentPlan
+from vlocbench.bench.experiment import EpisodeTask, ExperimentPlan, MethodSpec
 from vlocbench.bench.gallery_capture import capture_gallery
 from vlocbench.bench.metrics import episode_metrics
 from vlocbench.bench.records import EpisodeResult
@@ -33,7 +33,7 @@ from vlocbench.bench.towns import route_named, town_named
 from vlocbench.config import to_dict
 from vlocbench.errors import ConfigError
 from vlocbench.loc.gallery import GALLERY_FILE, Gallery
-from vlocbench.loc.mapping import MAP_FILE, build_map, default_map_dir
+from vlocbench.loc.mapping import MAP_FILE, MappingConfig, build_map, default_map_dir
 from vlocbench.sim import Simulator
 
 logger = logging.getLogger(__name__)
@@ -201,20 +201,35 @@ class _StageBars:
         self.bars.clear()
 
 
-def prepare_maps(plan: ExperimentPlan, progress: bool = False) -> dict[tuple[str, str], str]:
-    """Capture each town's gallery and build each method's map, unless the cache has them."""
+def prepare_maps(
+    plan: ExperimentPlan, progress: bool = False, workers: int = 1
+) -> dict[tuple[str, str], str]:
+    """Capture each town's gallery and build each method's map, unless the cache has them; returns
+    the map folders by (town, method name). With ``workers`` > 1 the galleries, then the maps, are
+    made side by side in as many processes (a gallery and a map build each use about one core)."""
     spec = plan.spec
     cache = Path(spec.cache).resolve()
-    out: dict[tuple[str, str], str] = {}
     if not (spec.recall or spec.failure):
-        return out
+        return {}
     bars = _StageBars(progress)
     try:
-        for town_name in spec.towns:
-            out.update(_prepare_town(plan, town_name, cache, bars))
+        if workers > 1:
+            todo = [
+                t for t in spec.towns if not (_gallery_dir(plan, t, cache) / GALLERY_FILE).exists()
+            ]
+            _in_parallel(_gallery_job, [(plan, t, cache) for t in todo], workers, bars, "galleries")
+        galleries = {t: _gallery(plan, t, cache, bars) for t in spec.towns}
+        jobs = {
+            (town, method.name): (town, galleries[town], method, method.mapping or spec.mapping,
+                                  cache)
+            for town in spec.towns for method in spec.methods if method.needs_map
+        }  # fmt: skip
+        if workers > 1:
+            todo = [j for j in jobs.values() if not (_map_dir(*j) / MAP_FILE).exists()]
+            _in_parallel(_map_job, todo, workers, bars, "maps")
+        return {key: str(_map(*job, bars)) for key, job in jobs.items()}
     finally:
         bars.close()
-    return out
 
 
 def prepare_gallery(plan: ExperimentPlan, town_name: str, progress: bool = False) -> Gallery:
@@ -226,9 +241,43 @@ def prepare_gallery(plan: ExperimentPlan, town_name: str, progress: bool = False
         bars.close()
 
 
+def _in_parallel(job: Callable[..., object], args: list[tuple[Any, ...]], workers: int,
+                 bars: _StageBars, stage: str) -> None:  # fmt: skip
+    """``job(*a)`` for every ``a`` of ``args`` on a pool of pool workers (one thread each); a
+    failure or an interruption stops the others. The jobs' own progress is not shown: one bar
+    counts the jobs."""
+    if len(args) < 2:
+        return  # one job runs in the driver, with every thread
+    logger.info(f"{len(args)} {stage} to make, {min(workers, len(args))} at a time")
+    pool = _local_pool(min(workers, len(args)))
+    try:
+        futures = [pool.submit(job, *a) for a in args]
+        for n, future in enumerate(cf.as_completed(futures), 1):
+            future.result()
+            bars(stage, n, len(args))
+    except BaseException:
+        _kill_workers(pool)
+        raise
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _gallery_job(plan: ExperimentPlan, town_name: str, cache: Path) -> None:
+    _gallery(plan, town_name, cache, _StageBars(False))
+
+
+def _map_job(town_name: str, gallery: Gallery, method: MethodSpec, mapping: MappingConfig,
+             cache: Path) -> None:  # fmt: skip
+    _map(town_name, gallery, method, mapping, cache, _StageBars(False))
+
+
+def _gallery_dir(plan: ExperimentPlan, town_name: str, cache: Path) -> Path:
+    return cache / "galleries" / f"{town_named(town_name).name}-{plan.gallery_key(town_name)}"
+
+
 def _gallery(plan: ExperimentPlan, town_name: str, cache: Path, bars: _StageBars) -> Gallery:
     spec, town = plan.spec, town_named(town_name)
-    gallery_dir = cache / "galleries" / f"{town.name}-{plan.gallery_key(town_name)}"
+    gallery_dir = _gallery_dir(plan, town_name, cache)
     if not (gallery_dir / GALLERY_FILE).exists():
         logger.info(f"{town.name}: capturing the gallery in {gallery_dir}")
         t = time.perf_counter()
@@ -242,25 +291,23 @@ def _gallery(plan: ExperimentPlan, town_name: str, cache: Path, bars: _StageBars
     return Gallery.load(gallery_dir)
 
 
-def _prepare_town(plan: ExperimentPlan, town_name: str, cache: Path,
-                  bars: _StageBars) -> dict[tuple[str, str], str]:  # fmt: skip
-    spec, town = plan.spec, town_named(town_name)
-    gallery = _gallery(plan, town_name, cache, bars)
-    out = {}
-    for method in (m for m in spec.methods if m.needs_map):
-        mapping = method.mapping or spec.mapping
-        map_dir = default_map_dir(cache / "maps", gallery, method.name, method.conf, mapping)
-        if not (map_dir / MAP_FILE).exists():
-            logger.info(f"{town.name}: building the {method.name} map in {map_dir}")
-        label = f"{town.name} {method.name}"
-        report = build_map(gallery, method.conf, map_dir, mapping,
-                           progress=lambda stage, done, total, label=label: bars(
-                               f"{label} {stage}", done, total))  # fmt: skip
-        logger.info(
-            f"{town.name}: {method.name} map: {report.images} images, {report.points} points"
-        )
-        out[(town_name, method.name)] = str(map_dir)
-    return out
+def _map_dir(town_name: str, gallery: Gallery, method: MethodSpec, mapping: MappingConfig,
+             cache: Path) -> Path:  # fmt: skip
+    return default_map_dir(cache / "maps", gallery, method.name, method.conf, mapping)
+
+
+def _map(town_name: str, gallery: Gallery, method: MethodSpec, mapping: MappingConfig,
+         cache: Path, bars: _StageBars) -> Path:  # fmt: skip
+    """The map of ``method`` on the town's ``gallery``, built unless the cache has it."""
+    map_dir = _map_dir(town_name, gallery, method, mapping, cache)
+    name = town_named(town_name).name
+    if not (map_dir / MAP_FILE).exists():
+        logger.info(f"{name}: building the {method.name} map in {map_dir}")
+    label = f"{name} {method.name}"
+    report = build_map(gallery, method.conf, map_dir, mapping,
+                       progress=lambda stage, done, total: bars(f"{label} {stage}", done, total))  # fmt: skip
+    logger.info(f"{name}: {method.name} map: {report.images} images, {report.points} points")
+    return map_dir
 
 
 def _row(task: EpisodeTask, outcome: EpisodeOutcome | None, error: str | None,
@@ -541,7 +588,7 @@ def run_experiment(
     _check_workers(workers)  # before hours of gallery and map building, not after
     t0 = time.perf_counter()
     with ResultStore(plan.output_dir, plan.name) as store:
-        maps = prepare_maps(plan, progress)
+        maps = prepare_maps(plan, progress, workers if scheduler is None else 1)
         tasks = plan.tasks(maps)
         store.start_run(plan.spec.spec_hash, to_dict(plan), [t.key for t in tasks])
         done = store.done_keys()
