@@ -50,6 +50,23 @@ def test_write_read_and_resume_keys(tmp_path):
         assert [r.key for r in store.rows("run1")] == ["a", "b"]
 
 
+def test_rows_stored_with_nan_before_strict_json_are_rewritten_on_open(tmp_path):
+    with ResultStore(tmp_path, "exp") as store:
+        store.start_run("run1", {"name": "exp"}, ["a"])
+        store.write_episode(_row("a"), synthetic_result(2))
+    with sqlite3.connect(tmp_path / DB_FILE) as db:  # as an older vlocbench wrote them
+        db.execute("""UPDATE episodes SET metrics='{"ct_mean_s": NaN, "failures": 1}'""")
+        db.execute("""UPDATE runs SET spec='{"name": "exp", "x": Infinity}'""")
+    with ResultStore(tmp_path, "exp") as store:
+        assert store.db.execute(
+            "SELECT json_valid(metrics), json_extract(metrics, '$.failures') FROM episodes"
+        ).fetchall() == [(1, 1)]
+        assert store.db.execute("SELECT spec FROM runs").fetchall() == [
+            ('{"name": "exp", "x": null}',)
+        ]
+        assert np.isnan(store.rows()[0].metrics["ct_mean_s"])
+
+
 def test_another_experiments_folder_and_a_busy_folder_are_refused(tmp_path):
     with (
         ResultStore(tmp_path, "exp"),

@@ -162,6 +162,19 @@ def _columns(result: EpisodeResult) -> tuple[dict[str, Any], dict[str, Any]]:
     return trajectory, localizations
 
 
+def _make_strict(db: sqlite3.Connection) -> None:
+    """Rewrite as strict JSON the rows that a store written before ``strict_json`` holds with
+    NaN in them (SQLite's JSON functions stop at such a row)."""
+    for table, key, column in (("episodes", "key", "config"), ("episodes", "key", "metrics"),
+                               ("runs", "run_hash", "spec")):  # fmt: skip
+        bad = db.execute(
+            f"SELECT {key}, {column} FROM {table} WHERE NOT json_valid({column})"
+        ).fetchall()
+        for k, text in bad:  # Python's json reads NaN
+            db.execute(f"UPDATE {table} SET {column}=? WHERE {key}=?",
+                       (strict_json(json.loads(text)), k))  # fmt: skip
+
+
 class ResultStore:
     """The results of one experiment in ``root``; use as a context manager (holds the lock)."""
 
@@ -193,6 +206,7 @@ class ResultStore:
         except sqlite3.DatabaseError as exc:
             self.close()
             raise StoreError(f"{self.root / DB_FILE} is not a vlocbench store: {exc}") from None
+        _make_strict(self.db)
         if row is None:
             self.db.execute("INSERT INTO meta VALUES ('experiment', ?)", (self.experiment,))
         elif row[0] != self.experiment:
