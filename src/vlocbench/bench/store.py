@@ -168,7 +168,7 @@ def _make_strict(db: sqlite3.Connection) -> None:
     for table, key, column in (("episodes", "key", "config"), ("episodes", "key", "metrics"),
                                ("runs", "run_hash", "spec")):  # fmt: skip
         bad = db.execute(
-            f"SELECT {key}, {column} FROM {table} WHERE NOT json_valid({column})"
+            f"SELECT {key}, {column} FROM {table} WHERE {column} NOTNULL AND NOT json_valid({column})"
         ).fetchall()
         for k, text in bad:  # Python's json reads NaN
             db.execute(f"UPDATE {table} SET {column}=? WHERE {key}=?",
