@@ -38,8 +38,9 @@ class Probe:
     name = "probe"
     uses_ground_truth = True
 
-    def __init__(self, shift_left_m=0.0, compute_time_s=0.0, camera=True):
+    def __init__(self, shift_left_m=0.0, compute_time_s=0.0, camera=True, covariance=None):
         self.shift_left_m = shift_left_m
+        self.covariance = covariance
         self.compute_time_s = compute_time_s
         self.cam = Camera("probe", Intrinsics(96, 72, 90.0), Extrinsics())
         self.queries: list[LocalizationQuery] = []
@@ -56,7 +57,7 @@ class Probe:
         self.queries.append(query)
         pose = query.true_world_from_vehicle
         shifted = pose @ planar_pose(0.0, self.shift_left_m, 0.0)
-        return PoseEstimate(True, shifted, None, self.compute_time_s)
+        return PoseEstimate(True, shifted, self.covariance, self.compute_time_s)
 
 
 def test_ground_truth_drive_completes_on_the_route(sim, path):
@@ -160,6 +161,15 @@ def test_a_slow_localizer_skips_queries_while_busy(sim, path):
     assert all(rec.latency_s == 0.8 for rec in r.localizations)
     fast = run_episode(sim, path, slow, dataclasses.replace(config, latency=LatencyConfig("none")))
     assert np.allclose(np.diff([rec.time_s for rec in fast.localizations]), 0.5)
+
+
+def test_an_answers_own_covariance_is_recorded_with_it(sim, path):
+    own = np.diag([0.04, 0.09, 0.0025])
+    config = EpisodeConfig(mode="ground_truth")
+    with_own = run_episode(sim, path, Probe(camera=False, covariance=own), config).localizations
+    assert with_own and all(np.allclose(r.covariance, own.ravel()) for r in with_own)
+    default = run_episode(sim, path, Probe(camera=False), config).localizations
+    assert all(r.covariance == () for r in default)  # the EKF used its own default
 
 
 def test_episodes_are_deterministic(sim, path):

@@ -1,3 +1,5 @@
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -42,3 +44,26 @@ def test_a_run_exports_as_bags_that_read_back(tmp_path, capsys):
     assert "wrote 0 bags" in capsys.readouterr().out
     assert main(["export", str(tmp_path / "none"), "--rosbag"]) == 1
     assert "holds no vlocbench results" in capsys.readouterr().err
+
+
+def test_an_answer_with_its_own_covariance_carries_it_into_the_bag(tmp_path):
+    """A plugin localizer's covariance is what the EKF got, so the bag gives it; an answer
+    without one gets the EKF's default."""
+    result = synthetic_result(0, queries=2)
+    own = np.array([[0.04, 0.01, 0.0], [0.01, 0.09, 0.002], [0.0, 0.002, 0.0025]])
+    first = dataclasses.replace(result.localizations[0], covariance=tuple(own.ravel()))
+    result = dataclasses.replace(result, localizations=(first, *result.localizations[1:]))
+    with ResultStore(tmp_path, "exp") as store:
+        store.start_run("r", {"name": "exp"}, ["a"])
+        store.write_episode(_row("a"), result)
+    assert main(["export", str(tmp_path), "--rosbag"]) == 0
+    typestore = get_typestore(Stores.ROS2_KILTED)
+    with Reader(tmp_path / "bags" / "a") as reader:
+        covariances = [
+            np.reshape(typestore.deserialize_cdr(raw, c.msgtype).pose.covariance, (6, 6))
+            for c, _, raw in reader.messages()
+            if c.topic == "/visual_pose_estimate"
+        ]
+    assert np.allclose(covariances[0][np.ix_([0, 1, 5], [0, 1, 5])], own)
+    assert np.allclose(covariances[0][2:5], 0) and np.allclose(covariances[0][:, 2:5], 0)
+    assert np.allclose(covariances[1], np.diag([0.1, 0.1, 0, 0, 0, 0.1]))

@@ -183,6 +183,7 @@ def _record(p: _InFlight, fused: bool | None) -> LocalizationRecord:
         reason=e.reason,
         retrieval_distances_m=tuple(float(d) for d in distances),
         retrieved_images=tuple(str(n) for n in e.info.get("retrieved", ())),
+        covariance=() if e.covariance is None else tuple(np.asarray(e.covariance, float).ravel()),
     )
 
 

@@ -54,6 +54,9 @@ class LocalizationRecord:
     # of the retrieval's best images, best first (m); empty for localizers without retrieval
     retrieval_distances_m: tuple[float, ...] = ()
     retrieved_images: tuple[str, ...] = ()  # the gallery images retrieval chose, best first
+    # the answer's own (3, 3) covariance of x, y, yaw (m^2, m rad, rad^2), row by row; empty when
+    # the localizer gave none and the EKF used its default (EkfConfig.pose_covariance)
+    covariance: tuple[float, ...] = ()
 
 
 @dataclass(frozen=True, kw_only=True)

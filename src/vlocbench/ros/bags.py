@@ -5,8 +5,9 @@ Per episode, in simulated time (the episode starts at 0 s): ``/ground_truth/odom
 pose), ``/wheel_odometry`` (``geometry_msgs/TwistWithCovarianceStamped``: the noisy reading the
 EKF got for each step, with the noise model's variances), ``/visual_pose_estimate``
 (``geometry_msgs/PoseWithCovarianceStamped``: each answer of the localizer in 6-DoF, written
-when it reached the EKF and stamped with its image's time, with the covariance the EKF gives an
-answer without its own: x, y and yaw from the episode's ``ekf`` config, the paper's 0.1) and ``/visual_pose_truth`` (the
+when it reached the EKF and stamped with its image's time, with the covariance the EKF got: the
+answer's own where the localizer gave one, else x, y and yaw from the episode's ``ekf`` config,
+the paper's 0.1) and ``/visual_pose_truth`` (the
 true pose at those image times). With ``images``, every query (answered or not) as
 ``/CAMERA/image/compressed`` (``sensor_msgs/CompressedImage``, JPEG, stamped and written at its
 image's time) and ``/CAMERA/camera_info``, rendered again from the true pose
@@ -76,12 +77,18 @@ def _pose_stamped(t_s: float, pose: Any, covariance: Array) -> Any:
     )
 
 
-def _fused_covariance(ekf: EkfConfig) -> Array:
-    """(6, 6): the x, y, yaw variances the EKF gives an answer without a covariance of its own
-    (every visual method's; a localizer's own covariance is not stored); z, roll, pitch 0."""
+def _pose_covariance(planar: Array) -> Array:
+    """(6, 6) over x, y, z, roll, pitch, yaw from the (3, 3) over x, y, yaw; z, roll, pitch 0."""
     covariance = np.zeros((6, 6))
-    covariance[[0, 1, 5], [0, 1, 5]] = np.diag(ekf.pose_covariance())
+    covariance[np.ix_([0, 1, 5], [0, 1, 5])] = planar
     return covariance
+
+
+def _answer_covariance(locs: dict[str, Array], k: int, default: Array) -> Array:
+    """(6, 6): the covariance the EKF got with answer ``k``, the answer's own where the localizer
+    gave one (episodes stored before it was kept have none), else ``default``."""
+    own = locs["covariance"][k] if "covariance" in locs else ()
+    return _pose_covariance(np.reshape(own, (3, 3))) if len(own) == 9 else default
 
 
 def _image_messages(config: dict[str, Any], locs: dict[str, Array]) -> list[tuple[float, str, Any]]:
@@ -137,7 +144,7 @@ def write_episode_bag(output_dir: str | Path, row: EpisodeRow, path: Path,
     at ``path``, written whole or not at all; ``images``: with the query images."""
     episode = row.config.get("episode", {})
     noise = from_dict(OdometryNoise, episode.get("odometry", {}))
-    fused = _fused_covariance(from_dict(EkfConfig, episode.get("ekf", {})))
+    default = _pose_covariance(from_dict(EkfConfig, episode.get("ekf", {})).pose_covariance())
     tr = read_episode_table(output_dir, row.key, "trajectory")
     locs = localizations(output_dir, row.key)
     messages: list[tuple[float, str, Any]] = []
@@ -163,8 +170,9 @@ def write_episode_bag(output_dir: str | Path, row: EpisodeRow, path: Path,
         ):
             t = locs["time_s"][k]
             arrival = t + locs["latency_s"][k]
+            covariance = _answer_covariance(locs, k, default)
             messages.append(
-                (arrival, "/visual_pose_estimate", _pose_stamped(t, _pose(estimate), fused))
+                (arrival, "/visual_pose_estimate", _pose_stamped(t, _pose(estimate), covariance))
             )
             messages.append(
                 (arrival, "/visual_pose_truth", _pose_stamped(t, _pose(truth), np.zeros((6, 6))))
