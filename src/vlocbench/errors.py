@@ -26,6 +26,10 @@ class ConfigError(VlocbenchError, ValueError):
         self.reason = reason
         super().__init__(f"{field}: {reason}")
 
+    def __reduce__(self) -> tuple[type, tuple[str, str]]:
+        # rebuilt from its fields, so that it crosses from a pool worker to the driver intact
+        return type(self), (self.field, self.reason)
+
 
 class UnknownNameError(ConfigError, KeyError):
     """A name (town, method, season, ...) is not one of the valid choices; the message lists them."""
@@ -38,6 +42,9 @@ class UnknownNameError(ConfigError, KeyError):
 
     def __str__(self) -> str:  # KeyError would otherwise quote the message
         return self.args[0]
+
+    def __reduce__(self) -> tuple[type, tuple[str, str, list[str]]]:
+        return type(self), (self.kind, self.name, self.valid)
 
 
 class RenderBackendError(MachineError):
