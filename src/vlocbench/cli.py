@@ -168,7 +168,7 @@ def _run(args: argparse.Namespace) -> int:
     from vlocbench.bench.report import summary_lines, write_report
     from vlocbench.bench.runner import default_workers, run_experiment
 
-    plan = load_experiment(args.experiment)
+    plan = load_experiment(args.experiment).only(args.towns or (), args.methods or ())
     if args.output:
         plan = plan.with_output(args.output)
     with _signals_interrupt():
@@ -351,6 +351,14 @@ def _localize(args: argparse.Namespace) -> int:
         f"cluster {', '.join(result.cluster)}; {times}"
     )
     return 0
+
+
+def _names(text: str) -> tuple[str, ...]:
+    """An argparse type: comma-separated names, at least one."""
+    names = tuple(n.strip() for n in text.split(",") if n.strip())
+    if not names:
+        raise argparse.ArgumentTypeError("expected comma-separated names, got none")
+    return names
 
 
 def _count(text: str) -> int:
@@ -551,6 +559,10 @@ def _add_experiment_verbs(sub: Any, shared: dict[str, argparse.ArgumentParser]) 
     p.add_argument("--workers", type=_count, help="local worker processes (default: one per core)")
     p.add_argument("--scheduler", help="Dask scheduler address, e.g. tcp://127.0.0.1:8786")
     p.add_argument("--output", type=Path, help="output folder (default: the experiment's)")
+    p.add_argument("--towns", type=_names, help="only these of its towns (comma-separated)")
+    p.add_argument("--methods", type=_names,
+                   help="only these of its methods (comma-separated); a later run of the whole "
+                   "experiment reuses their episodes")  # fmt: skip
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--no-report", action="store_true", help="skip the report")
     p.set_defaults(func=_run)

@@ -77,6 +77,24 @@ def test_expansion_counts_and_keys():
     assert len(traffic.tasks({})) == 4
 
 
+def test_part_of_a_plan_keeps_its_episode_keys():
+    maps = {**MAPS, ("town01", "sift-vlad"): "/cache/maps/g2/s", ("town01", "orb"): "/c/g2/o"}
+    whole = _spec(towns=["town01", "town10"], sweep={"illumination.k": [0, 6]},
+                  methods=["sift-vlad", {"name": "orb", "features": "orb-teblid",
+                                         "matcher": "nn-hamming", "retrieval": "vlad"}])  # fmt: skip
+    part = whole.only(towns=["town10"], methods=["orb"])
+    assert part.spec.towns == ("town10",) and [m.name for m in part.spec.methods] == ["orb"]
+    keys = {t.key: t for t in whole.tasks(maps)}
+    tasks = part.tasks(maps)
+    assert tasks and all(t.key in keys and t.town == "town10" for t in tasks)
+    assert {t.method.name for t in tasks if t.method} == {"orb"}
+    assert whole.only().tasks(maps) == whole.tasks(maps)
+    with pytest.raises(UnknownNameError, match="valid: orb, sift-vlad"):
+        whole.only(methods=["sift"])
+    with pytest.raises(UnknownNameError, match="unknown town 'town02'; valid: town01, town10"):
+        whole.only(towns=["town02"])
+
+
 def test_episode_settings_sweep_as_setups():
     plan = _spec(sweep={"episode.ekf.late_measurements": ["current", "replay"]})
     assert [s.episode.ekf.late_measurements for s in plan.setups] == ["current", "replay"]

@@ -22,7 +22,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import itertools
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -251,6 +251,21 @@ class ExperimentPlan:
     def with_output(self, output: str | Path) -> ExperimentPlan:
         """The same plan writing its results to ``output``."""
         return dataclasses.replace(self, spec=dataclasses.replace(self.spec, output=str(output)))
+
+    def only(self, towns: Sequence[str] = (), methods: Sequence[str] = ()) -> ExperimentPlan:
+        """The part of the plan in ``towns`` and with ``methods`` (empty: all of them). Its
+        episodes keep their keys, so a later run of the whole plan reuses them."""
+        s = self.spec
+        for kind, names, valid in (("town", towns, s.towns), ("method", methods,
+                                                              [m.name for m in s.methods])):  # fmt: skip
+            for name in names:
+                if name not in valid:
+                    raise UnknownNameError(kind, name, valid)  # valid: the experiment's own
+        return dataclasses.replace(self, spec=dataclasses.replace(
+            s,
+            towns=tuple(t for t in s.towns if not towns or t in towns),
+            methods=tuple(m for m in s.methods if not methods or m.name in methods),
+        ))  # fmt: skip
 
     def gallery_key(self, town: str) -> str:
         """What determines a town's gallery: the town, the route, the drive and the scene
