@@ -256,16 +256,17 @@ class ExperimentPlan:
         """The part of the plan in ``towns`` and with ``methods`` (empty: all of them). Its
         episodes keep their keys, so a later run of the whole plan reuses them."""
         s = self.spec
-        for kind, names, valid in (("town", towns, s.towns), ("method", methods,
-                                                              [m.name for m in s.methods])):  # fmt: skip
+        choices = {"town": (towns, s.towns), "method": (methods, [m.name for m in s.methods])}
+        for kind, (names, valid) in choices.items():
             for name in names:
                 if name not in valid:
                     raise UnknownNameError(kind, name, valid)  # valid: the experiment's own
-        return dataclasses.replace(self, spec=dataclasses.replace(
+        part = dataclasses.replace(
             s,
             towns=tuple(t for t in s.towns if not towns or t in towns),
             methods=tuple(m for m in s.methods if not methods or m.name in methods),
-        ))  # fmt: skip
+        )
+        return dataclasses.replace(self, spec=part)
 
     def gallery_key(self, town: str) -> str:
         """What determines a town's gallery: the town, the route, the drive and the scene

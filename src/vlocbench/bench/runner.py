@@ -219,13 +219,15 @@ def prepare_maps(
             ]
             _in_parallel(_gallery_job, [(plan, t, cache) for t in todo], workers, bars, "galleries")
         galleries = {t: _gallery(plan, t, cache, bars) for t in spec.towns}
-        jobs = {
-            (town, method.name): (town, galleries[town], method, method.mapping or spec.mapping,
-                                  cache)
-            for town in spec.towns for method in spec.methods if method.needs_map
-        }  # fmt: skip
+        jobs = {}  # (town, method name) -> what _map builds it from
+        for town in spec.towns:
+            for method in (m for m in spec.methods if m.needs_map):
+                mapping = method.mapping or spec.mapping
+                map_dir = default_map_dir(cache / "maps", galleries[town], method.name,
+                                          method.conf, mapping)  # fmt: skip
+                jobs[(town, method.name)] = (town, galleries[town], method, mapping, map_dir)
         if workers > 1:
-            todo = [j for j in jobs.values() if not (_map_dir(*j) / MAP_FILE).exists()]
+            todo = [j for j in jobs.values() if not (j[-1] / MAP_FILE).exists()]
             _in_parallel(_map_job, todo, workers, bars, "maps")
         return {key: str(_map(*job, bars)) for key, job in jobs.items()}
     finally:
@@ -267,8 +269,8 @@ def _gallery_job(plan: ExperimentPlan, town_name: str, cache: Path) -> None:
 
 
 def _map_job(town_name: str, gallery: Gallery, method: MethodSpec, mapping: MappingConfig,
-             cache: Path) -> None:  # fmt: skip
-    _map(town_name, gallery, method, mapping, cache, _StageBars(False))
+             map_dir: Path) -> None:  # fmt: skip
+    _map(town_name, gallery, method, mapping, map_dir, _StageBars(False))
 
 
 def _gallery_dir(plan: ExperimentPlan, town_name: str, cache: Path) -> Path:
@@ -291,15 +293,9 @@ def _gallery(plan: ExperimentPlan, town_name: str, cache: Path, bars: _StageBars
     return Gallery.load(gallery_dir)
 
 
-def _map_dir(town_name: str, gallery: Gallery, method: MethodSpec, mapping: MappingConfig,
-             cache: Path) -> Path:  # fmt: skip
-    return default_map_dir(cache / "maps", gallery, method.name, method.conf, mapping)
-
-
 def _map(town_name: str, gallery: Gallery, method: MethodSpec, mapping: MappingConfig,
-         cache: Path, bars: _StageBars) -> Path:  # fmt: skip
-    """The map of ``method`` on the town's ``gallery``, built unless the cache has it."""
-    map_dir = _map_dir(town_name, gallery, method, mapping, cache)
+         map_dir: Path, bars: _StageBars) -> Path:  # fmt: skip
+    """The map of ``method`` on the town's ``gallery`` in ``map_dir``, built unless it is there."""
     name = town_named(town_name).name
     if not (map_dir / MAP_FILE).exists():
         logger.info(f"{name}: building the {method.name} map in {map_dir}")
