@@ -1,3 +1,5 @@
+import pytest
+
 from vlocbench.cli import build_parser, main
 
 
@@ -103,3 +105,15 @@ def test_exit_codes_by_kind_of_error(capsys, tmp_path):
     assert "has no run yet" in capsys.readouterr().err
     help_text = build_parser().format_help()
     assert "exit codes:" in help_text and "3  the machine stops it" in help_text
+
+
+def test_run_part_of_an_experiment_names_what_it_lacks(capsys, tmp_path):
+    experiment = "experiments/paper/illumination_reduced.yaml"
+    out = ["--output", str(tmp_path / "out")]
+    assert main(["run", experiment, "--methods", "sfit", *out]) == 1  # before any work
+    assert "unknown method 'sfit'; valid: sift, xfeat-lighterglue" in capsys.readouterr().err
+    assert main(["run", experiment, "--towns", "town02", *out]) == 1
+    assert "unknown town 'town02'; valid: town01, town10" in capsys.readouterr().err
+    with pytest.raises(SystemExit, match="2"):  # a usage error, from argparse
+        main(["run", experiment, "--methods", " , "])
+    assert "expected comma-separated names, got none" in capsys.readouterr().err
