@@ -2,21 +2,30 @@
 
     python benchmarks/bench_illumination.py [--town town10] [--method sift] [--k 0,2,4,6,8,10]
                                             [--queries 60] [--max-gain 512] [--shot-noise 0.02]
-                                            [--read-noise 0.02]
+                                            [--read-noise 0.02] [--retrieval map|pose-prior]
+                                            [--experiment FILE]
 
 Renders the gallery camera at ``--queries`` poses spread along the route (half-way between gallery
 images), at each illumination level k, localizes each with the method's map (built once under
 out/cache, as an experiment would) and prints T1 / T2 / T3 recall beside the paper's Table 5
 (SIFT with AP-GeM / NetVLAD). The camera's exposure range and noise (``Exposure``) are the knobs:
 one setting for every k and both towns, chosen so that recall falls with k as the paper's does.
+
+``--retrieval pose-prior`` retrieves the map images nearest to the true pose instead of asking the
+map's retrieval: the local features alone, to tell their misses from the retrieval's.
+``--experiment FILE`` takes ``--method`` with its settings (localizer, mapping) from an experiment,
+so the maps are that experiment's.
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+from pathlib import Path
+from typing import Any
 
 import numpy as np
+import yaml
 
 from vlocbench.bench.experiment import load_experiment
 from vlocbench.bench.localizer import LocalizationQuery
@@ -25,7 +34,9 @@ from vlocbench.bench.paper import paper_results
 from vlocbench.bench.runner import prepare_maps
 from vlocbench.bench.towns import route_named, town_named
 from vlocbench.bench.visual import VisualLocalizer
+from vlocbench.errors import UnknownNameError
 from vlocbench.geometry import planar_pose, pose_error
+from vlocbench.loc.localizer import RETRIEVAL_SOURCES
 from vlocbench.sim import Conditions, Exposure, Illumination, Simulator
 
 
@@ -39,12 +50,21 @@ def main() -> None:
     ap.add_argument("--max-gain", type=float, default=defaults.max_gain)
     ap.add_argument("--shot-noise", type=float, default=defaults.shot_noise)
     ap.add_argument("--read-noise", type=float, default=defaults.read_noise)
+    ap.add_argument("--retrieval", default="map", choices=RETRIEVAL_SOURCES)
+    ap.add_argument("--experiment", type=Path, help="take --method's settings from this file")
     args = ap.parse_args()
+    method: Any = args.method
+    if args.experiment:
+        methods = yaml.safe_load(args.experiment.read_text())["methods"]
+        named = {m if isinstance(m, str) else m["name"]: m for m in methods}
+        if args.method not in named:
+            raise UnknownNameError("method", args.method, named)
+        method = named[args.method]
     plan = load_experiment(
         {
             "name": "bench_illumination",
             "towns": [args.town],
-            "methods": [args.method],
+            "methods": [method],
             "failure": False,
             "baseline": False,
         }
@@ -52,7 +72,8 @@ def main() -> None:
     map_dir = prepare_maps(plan, progress=True)[(args.town, args.method)]
     town, route = town_named(args.town), route_named(args.town)
     camera = dataclasses.replace(plan.spec.gallery.camera, name="query")
-    localizer = VisualLocalizer(map_dir, (camera,), name=args.method)
+    config = dataclasses.replace(plan.spec.methods[0].localizer, retrieval=args.retrieval)
+    localizer = VisualLocalizer(map_dir, (camera,), config, name=args.method)
     exposure = Exposure(
         max_gain=args.max_gain, shot_noise=args.shot_noise, read_noise=args.read_noise
     )
@@ -64,7 +85,9 @@ def main() -> None:
     yaws = np.interp(s, route.s_m, yaw)
     paper = paper_results().tables["illumination"]
     t1_paper = {m: dict(zip(paper.recall_levels, v)) for m, v in paper.recall_t1[args.town].items()}
-    print(f"{args.town}, {args.method}, {args.queries} queries; {exposure}")
+    print(
+        f"{args.town}, {args.method}, {args.queries} queries, retrieval {args.retrieval}; {exposure}"
+    )
     print("k | gain | T1 / T2 / T3 (%) | paper AP-GeM / NetVLAD + SIFT T1")
     sim = Simulator(town)
     try:

@@ -105,6 +105,27 @@ def test_pose_prior_retrieval(sim, stretch, gallery, tmp_path):
     assert _errors(result.world_from_cam, frame.world_from_cam)[0] < 0.25
 
 
+def test_pose_prior_retrieval_on_a_map_with_its_own_retrieval(sim, stretch, sift_map):
+    frame = _render(sim, query_pose(stretch, 12))
+    own = MapLocalizer(sift_map[0])
+    prior_only = MapLocalizer(sift_map[0], LocalizerConfig(retrieval="pose-prior"))
+    assert not own.needs_prior and prior_only.needs_prior
+    with pytest.raises(LocalizationError, match="prior"):
+        prior_only.localize(frame.image, camera_model(CAMERA))
+    gallery_xy = {m.name: m.world_from_cam[:3, 3] for m in own.images}
+    # a prior elsewhere on the stretch: the retrieved images are the ones nearest to it, not to
+    # the image, which the map's own retrieval finds
+    elsewhere = _render(sim, query_pose(stretch, 24)).world_from_cam
+    result = prior_only.localize(frame.image, camera_model(CAMERA), elsewhere)
+    assert all(np.linalg.norm(gallery_xy[n] - elsewhere[:3, 3]) < 6.0 for n in result.retrieved)
+    result = own.localize(frame.image, camera_model(CAMERA), elsewhere)
+    truth_xy = frame.world_from_cam[:3, 3]
+    assert min(np.linalg.norm(gallery_xy[n] - truth_xy) for n in result.retrieved) < 3.0
+    result = prior_only.localize(frame.image, camera_model(CAMERA), frame.world_from_cam)
+    assert result.success
+    assert _errors(result.world_from_cam, frame.world_from_cam)[0] < 0.25
+
+
 def test_bad_query_images_are_clear_errors(sift_map):
     localizer = MapLocalizer(sift_map[0])
     cam = camera_model(CAMERA)
@@ -149,6 +170,8 @@ def test_bad_localizer_and_mapping_configs():
         LocalizerConfig(min_inliers=3)
     with pytest.raises(ConfigError, match="confident_inliers"):
         LocalizerConfig(confident_inliers=-1)
+    with pytest.raises(ConfigError, match=r"localizer\.retrieval.*valid: map, pose-prior"):
+        LocalizerConfig(retrieval="gps")
     with pytest.raises(ConfigError, match=r"mapping\.pairs"):
         MappingConfig(pairs="random")
 

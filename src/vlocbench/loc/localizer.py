@@ -19,7 +19,7 @@ import pycolmap
 from numpy.typing import NDArray
 
 from vlocbench.config import ADDED_OPTION, require
-from vlocbench.errors import LocalizationError
+from vlocbench.errors import LocalizationError, UnknownNameError
 from vlocbench.geometry import invert_pose, skew
 from vlocbench.loc.features import Features, check_image
 from vlocbench.loc.gallery import CameraModel
@@ -53,6 +53,9 @@ class RosEndpoint:
         require(self.timeout_s > 0, "ros.timeout_s", "must be > 0")
 
 
+RETRIEVAL_SOURCES = ("map", "pose-prior")  # LocalizerConfig.retrieval
+
+
 @dataclass(frozen=True)
 class LocalizerConfig:
     top_k: int = 5
@@ -69,6 +72,9 @@ class LocalizerConfig:
     confident_inliers: int = 0
     # an external ROS 2 node answers instead of a map in this process (``vlocbench.ros``)
     ros: RosEndpoint | None = field(default=None, metadata=ADDED_OPTION)
+    # "map": the map's own retrieval; "pose-prior": the map images nearest the prior pose instead
+    # (sequential localization with any map; with the true pose as prior, the local features alone)
+    retrieval: str = field(default="map", metadata=ADDED_OPTION)
 
     def __post_init__(self) -> None:
         require(self.top_k >= 1, "localizer.top_k", "must be >= 1")
@@ -79,6 +85,8 @@ class LocalizerConfig:
             f"must be 0 (any PnP answer) or >= {MIN_PNP_POINTS}",
         )
         require(self.confident_inliers >= 0, "localizer.confident_inliers", "must be >= 0")
+        if self.retrieval not in RETRIEVAL_SOURCES:
+            raise UnknownNameError("localizer.retrieval", self.retrieval, RETRIEVAL_SOURCES)
 
     @property
     def min_points(self) -> int:
@@ -220,13 +228,13 @@ class MapLocalizer:
 
     @property
     def needs_prior(self) -> bool:
-        return self.descriptor is None
+        return self.descriptor is None or self.config.retrieval == "pose-prior"
 
     def _retrieve(self, image: NDArray[np.uint8], feats: Features,
                   prior_world_from_cam: NDArray[np.float64] | None) -> NDArray[np.int64]:  # fmt: skip
         """The best ``max(top_k, RANKED)`` map images, best first."""
         c, k = self.config, max(self.config.top_k, RANKED)
-        if self.descriptor is None:
+        if self.needs_prior:
             if prior_world_from_cam is None:
                 raise LocalizationError("pose-prior retrieval needs a prior pose")
             return nearest_poses(self.poses, prior_world_from_cam, k, c.prior_max_angle_deg)
