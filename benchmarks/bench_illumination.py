@@ -13,8 +13,8 @@ one setting for every k and both towns, chosen so that recall falls with k as th
 
 ``--retrieval pose-prior`` retrieves the map images nearest to the true pose instead of asking the
 map's retrieval: the local features alone, to tell their misses from the retrieval's.
-``--experiment FILE`` takes ``--method`` with its settings (localizer, mapping) from an experiment,
-so the maps are that experiment's.
+``--experiment FILE`` takes ``--town`` and ``--method`` with their settings (gallery, mapping,
+localizer) from an experiment, so the maps are that experiment's.
 """
 
 from __future__ import annotations
@@ -22,10 +22,8 @@ from __future__ import annotations
 import argparse
 import dataclasses
 from pathlib import Path
-from typing import Any
 
 import numpy as np
-import yaml
 
 from vlocbench.bench.experiment import load_experiment
 from vlocbench.bench.localizer import LocalizationQuery
@@ -34,7 +32,6 @@ from vlocbench.bench.paper import paper_results
 from vlocbench.bench.runner import prepare_maps
 from vlocbench.bench.towns import route_named, town_named
 from vlocbench.bench.visual import VisualLocalizer
-from vlocbench.errors import UnknownNameError
 from vlocbench.geometry import planar_pose, pose_error
 from vlocbench.loc.localizer import RETRIEVAL_SOURCES
 from vlocbench.sim import Conditions, Exposure, Illumination, Simulator
@@ -51,24 +48,24 @@ def main() -> None:
     ap.add_argument("--shot-noise", type=float, default=defaults.shot_noise)
     ap.add_argument("--read-noise", type=float, default=defaults.read_noise)
     ap.add_argument("--retrieval", default="map", choices=RETRIEVAL_SOURCES)
-    ap.add_argument("--experiment", type=Path, help="take --method's settings from this file")
-    args = ap.parse_args()
-    method: Any = args.method
-    if args.experiment:
-        methods = yaml.safe_load(args.experiment.read_text())["methods"]
-        named = {m if isinstance(m, str) else m["name"]: m for m in methods}
-        if args.method not in named:
-            raise UnknownNameError("method", args.method, named)
-        method = named[args.method]
-    plan = load_experiment(
-        {
-            "name": "bench_illumination",
-            "towns": [args.town],
-            "methods": [method],
-            "failure": False,
-            "baseline": False,
-        }
+    ap.add_argument(
+        "--experiment",
+        type=Path,
+        help="take --town and --method with their settings from this file",
     )
+    args = ap.parse_args()
+    if args.experiment:  # its gallery, mapping and method settings: the maps it built
+        plan = load_experiment(args.experiment).only([args.town], [args.method])
+    else:
+        plan = load_experiment(
+            {
+                "name": "bench_illumination",
+                "towns": [args.town],
+                "methods": [args.method],
+                "failure": False,
+                "baseline": False,
+            }
+        )
     map_dir = prepare_maps(plan, progress=True)[(args.town, args.method)]
     town, route = town_named(args.town), route_named(args.town)
     camera = dataclasses.replace(plan.spec.gallery.camera, name="query")
