@@ -85,7 +85,8 @@ def main() -> None:
     print(
         f"{args.town}, {args.method}, {args.queries} queries, retrieval {args.retrieval}; {exposure}"
     )
-    print("k | gain | T1 / T2 / T3 (%) | paper AP-GeM / NetVLAD + SIFT T1")
+    # gain: the sensor's; exposure: the share of the metered exposure it reached (1: none short)
+    print("k | gain | exposure | T1 / T2 / T3 (%) | paper AP-GeM / NetVLAD + SIFT T1")
     sim = Simulator(town)
     try:
         for k in (float(v) for v in args.k.split(",")):
@@ -105,8 +106,9 @@ def main() -> None:
             rec = recall(np.array(pos), np.array(rot))
             ref = " / ".join(f"{t1_paper[m].get(int(k), float('nan')):.1f}"
                              for m in ("AP-GeM + SIFT", "NetVLAD + SIFT"))  # fmt: skip
-            gain = sim.renderer.gain
-            print(f"{k:g} | {gain:.0f} | " + " / ".join(f"{100 * v:.1f}" for v in rec[:3])
+            gain, share = sim.renderer.gain, sim.renderer.exposure
+            print(f"{k:g} | {gain:.0f} | {share:.3g} | "
+                  + " / ".join(f"{100 * v:.1f}" for v in rec[:3])
                   + f" | {ref}", flush=True)  # fmt: skip
     finally:
         sim.close()

@@ -59,33 +59,23 @@ def test_brightness_falls_with_k(small_sim):
     assert means[-1] < 1 < 60 < means[0]  # without adapting, night is black
 
 
-def test_auto_exposure_keeps_dusk_bright_and_noisy(small_sim):
+def test_auto_exposure_keeps_dusk_bright(small_sim):
     noon = render(small_sim, Conditions()).image.astype(float)
     dusk = Illumination(k=4)
     fixed = render(small_sim, Conditions(illumination=dusk, exposure=Exposure("fixed"))).image
     auto = render(small_sim, Conditions(illumination=dusk)).image.astype(float)
     gain = small_sim.renderer.gain
-    assert 30 < gain < 100  # 1/16 of the sun at 4.5 degrees: about 6 stops darker than noon
-    assert fixed.mean() < auto.mean() / 10  # without adapting, dusk is dark
+    assert 30 < gain < 96  # 1/16 of the sun at 4.5 degrees: about 6 stops darker than noon
+    assert fixed.mean() < auto.mean() / 4  # without adapting, dusk is dark
     assert abs(auto.mean() - noon.mean()) < 0.25 * noon.mean()  # the camera opens up
-    # and pays in noise: shot noise grows as the square root of the gain
+    # the default camera (CARLA's kind) adds no noise: another frame is the same image
+    again = small_sim.render([Camera("g", SMALL, Extrinsics())], frame_id=11)[0].image
+    assert np.array_equal(again, auto)
+    # the shot-noise option pays for its gain, the noise growing as the square root of the gain
     grain = np.abs(np.diff(auto, axis=1)).mean()
-    assert grain > 2.5 * np.abs(np.diff(noon, axis=1)).mean()
-
-
-def test_contrast_falls_with_exponential_fog(small_sim):
-    front = Camera("front", SMALL, Extrinsics(z_m=1.6, yaw_deg=0.0))
-    stds = [
-        gray(
-            render(
-                small_sim,
-                Conditions(weather=Weather(fog_visual_range_m=v, fog_model="exponential")),
-                front,
-            )
-        ).std()
-        for v in (None, 60.0, 10.0)
-    ]
-    assert stds[0] > stds[1] > stds[2], stds
+    noisy = Exposure(max_gain=65536.0, shot_noise=0.03)
+    auto_noisy = render(small_sim, Conditions(illumination=dusk, exposure=noisy)).image
+    assert np.abs(np.diff(auto_noisy.astype(float), axis=1)).mean() > 2.5 * grain
 
 
 def test_paper_fog_starts_at_the_visual_range(small_sim):
@@ -100,9 +90,7 @@ def test_paper_fog_starts_at_the_visual_range(small_sim):
     assert np.abs(starts[near] - clear[near]).mean() < 1.0
     assert np.abs(exponential[near] - clear[near]).mean() > 10.0
     far = (slice(95, 118), slice(0, 150))  # the far end of the street, beyond 15 m
-    fog_grey = starts[far].mean()
-    sensor_noise = np.sqrt(Exposure().shot_noise * fog_grey)  # shot noise at gain 1
-    assert clear[far].std() > 10.0 and starts[far].std() < 1.2 * sensor_noise  # uniform fog
+    assert clear[far].std() > 10.0 and starts[far].std() < 1.0  # uniform fog
 
 
 def test_winter_differs_from_summer(small_sim):
@@ -116,15 +104,12 @@ def test_winter_differs_from_summer(small_sim):
 def test_headlights_light_the_road_at_night(small_sim):
     front = Camera("front", SMALL, Extrinsics(z_m=1.6, yaw_deg=0.0, pitch_deg=5.0))
     dark = gray(render(small_sim, Conditions(illumination=Illumination(k=10)), front))
-    dark_gain = small_sim.renderer.gain
+    assert small_sim.renderer.exposure < 0.01  # far beyond the camera's range
     night = Conditions(illumination=Illumination(k=10), headlights=Headlights(on=True))
     lit = gray(render(small_sim, night, front))
-    assert small_sim.renderer.gain < dark_gain / 100  # the meter sees the headlights
+    assert small_sim.renderer.exposure == 1.0  # the meter sees the headlights
     road = slice(SMALL.height // 2 + 20, None)
-    # without them the camera amplifies noise; with them it sees the road
-    grain = [np.abs(np.diff(img[road], axis=1)).mean() for img in (dark, lit)]
-    assert grain[1] < grain[0] / 4
-    assert lit[road].mean() > 20
+    assert dark[road].mean() < 5 and lit[road].mean() > 20
 
 
 def test_projection_matches_the_render(small_sim):
@@ -178,3 +163,18 @@ def test_sift_finds_enough_keypoints_on_town01_gallery_images():
         counts.append(len(sift.detect(cv2.cvtColor(image, cv2.COLOR_RGB2GRAY))))
     sim.close()
     assert np.median(counts) >= 500, counts
+
+
+def test_beyond_its_range_the_camera_records_the_share_of_exposure_it_reached(small_sim):
+    """A camera that cannot open up enough records the metered image darkened through its gamma:
+    display values times (reached / needed exposure)^(1/2.2), not times the share itself."""
+    dusk = Illumination(k=4)
+    full = render(small_sim, Conditions(illumination=dusk, exposure=Exposure(shot_noise=0.0)))
+    needed = small_sim.renderer.gain
+    short = Exposure(max_gain=4.0, shot_noise=0.0)
+    dark = render(small_sim, Conditions(illumination=dusk, exposure=short))
+    assert small_sim.renderer.gain == 4.0
+    share = 4.0 / needed
+    expected = (share ** (1 / 2.2)) * full.image.astype(float).mean()
+    assert dark.image.astype(float).mean() == pytest.approx(expected, rel=0.03)
+    assert dark.image.mean() > 3 * share * full.image.mean()  # far brighter than linear

@@ -137,17 +137,19 @@ class Headlights:
 
 @dataclass(frozen=True)
 class Exposure:
-    """The camera. ``auto`` (the default, as CARLA's RGB camera adapts its exposure): the camera
-    meters the daylight and opens up by up to ``max_gain`` (its exposure range: 2^16, wider than
-    the paper's darkest level needs) to keep the brightness of noon. ``fixed``: gain 1, so dim
-    scenes are dark. Sensor noise grows with the gain: photon shot noise (variance ``shot_noise``
-    x gain per grey level: at noon about 2,100 photo-electrons at grey level 64, an SNR of 46) and read
-    noise (``read_noise`` x gain grey levels). Calibrated against the paper's recall at each k:
-    see ``vlocbench.sim.light`` and ``benchmarks/bench_illumination.py``."""
+    """The camera, by default CARLA's kind (the paper's): ``auto`` exposure meters the daylight and
+    opens up by at most ``max_gain`` (its exposure range) to keep the brightness of noon; beyond
+    that range the image darkens through the camera's gamma (a dark image, as CARLA's at night,
+    whose auto exposure spans only EV100 10-12 by default), with no sensor noise. ``fixed``: gain
+    1, so every dim scene is dark. ``max_gain`` is calibrated against the paper's SIFT recall at
+    each k (``benchmarks/bench_illumination.py``; README). Sensor noise, if wanted, grows with the
+    gain: photon shot noise (variance ``shot_noise`` x gain per grey level) and read noise
+    (``read_noise`` x gain grey levels); ``Exposure(max_gain=65536, shot_noise=0.03)`` is
+    vlocbench's earlier night, a bright image paid for in shot noise (docs/fidelity.md)."""
 
     mode: Literal["auto", "fixed"] = "auto"
-    max_gain: float = 65536.0
-    shot_noise: float = 0.03
+    max_gain: float = 96.0
+    shot_noise: float = 0.0
     read_noise: float = 0.0
 
     def __post_init__(self) -> None:

@@ -11,10 +11,12 @@ that reaches the town follows from them physically, relative to noon (k = 0, ele
 - overcast moves light from the sun to the sky.
 
 The camera meters that light and opens up (longer exposure, then gain) by up to ``max_gain``
-(its exposure range); the gain is applied to the light before rendering, so a dim scene keeps its
-full tonal resolution. Beyond the range the image darkens. Sensor noise grows with the gain: photon
+(its exposure range). The scene is rendered as the metered exposure would show it, so a dim scene
+keeps its full tonal resolution; beyond the range the camera reaches only a share e < 1 of that
+exposure, and its gamma-encoded output (display = linear^(1/2.2), as sRGB and CARLA's tone curve)
+darkens by e^(1/2.2) before the 8-bit quantization. Sensor noise grows with the gain: photon
 shot noise (variance ``shot_noise * gain`` per grey level) and read noise (``read_noise * gain``).
-The camera's three numbers are calibrated once, against the recall the paper measured at each k
+The camera's range is calibrated once, against the recall the paper measured at each k
 (``benchmarks/bench_illumination.py``); see the README.
 """
 
@@ -27,6 +29,7 @@ import numpy as np
 NOON_DIRECT = 0.7  # diffuse colour of the sun light at noon (MuJoCo light units)
 NOON_AMBIENT = 0.35  # ambient (sky) light at noon
 BEAM_TRANSMITTANCE = 0.7  # Meinel and Meinel: beam fraction through one clear air mass
+DISPLAY_GAMMA = 2.2  # the camera's output encoding: display value = linear ** (1 / 2.2)
 
 
 def air_mass(elevation_rad: float) -> float:
@@ -74,11 +77,21 @@ def exposure_gain(light: Daylight, reference: Daylight, extra: float, max_gain: 
 
 
 def sensor_noise(
-    image: np.ndarray, gain: float, shot_noise: float, read_noise: float, rng: np.random.Generator
+    image: np.ndarray,
+    gain: float,
+    shot_noise: float,
+    read_noise: float,
+    rng: np.random.Generator,
+    exposure: float = 1.0,
 ) -> np.ndarray:
-    """``image`` (H, W, 3) uint8 with the shot and read noise of a sensor at ``gain``: per pixel
-    sigma^2 = shot_noise * gain * grey + (read_noise * gain)^2 (grey levels), one draw per pixel."""
+    """``image`` (H, W, 3) uint8, rendered at the metered exposure, as the camera records it: first
+    darkened by the share ``exposure`` (<= 1) of that exposure it reached (display values times
+    exposure^(1/DISPLAY_GAMMA)), then with the shot and read noise of a sensor at ``gain``: per
+    pixel sigma^2 = shot_noise * gain * grey + (read_noise * gain)^2 (grey levels), one draw per
+    pixel."""
     rgb = image.astype(np.float32)
+    if exposure < 1.0:
+        rgb *= np.float32(exposure ** (1.0 / DISPLAY_GAMMA))
     # the channels' mean summed in order: in float32 exactly numpy's mean, without its slow reduce
     grey = rgb[..., 0] + rgb[..., 1]
     grey += rgb[..., 2]

@@ -95,10 +95,11 @@ class Renderer:
         e = conditions.exposure
         noon = daylight(1.0, ill.sun_elevation_base_rad, 0.0, ill.sun_elevation_base_rad)
         headlight_reading = HEADLIGHT_METERING * h.intensity if h.on else 0.0
-        self.gain = (
-            exposure_gain(light, noon, headlight_reading, e.max_gain) if e.mode == "auto" else 1.0
-        )
-        g = self.gain
+        # the scene is lit as the metered exposure shows it; a camera that cannot reach it
+        # (beyond its range, or fixed) records the share it reached, darker (sensor_noise)
+        g = exposure_gain(light, noon, headlight_reading, np.inf)
+        self.gain = min(g, e.max_gain) if e.mode == "auto" else 1.0
+        self.exposure = self.gain / g
         m.light_diffuse[sc.sun_light_id] = sun_color * light.direct * g
         m.light_ambient[sc.sun_light_id] = np.array([0.92, 0.95, 1.0]) * light.ambient * g
         m.light_specular[sc.sun_light_id] = 0.2 * light.direct * g
@@ -222,7 +223,12 @@ class Renderer:
             image = apply_rain(image, rain, self.sky_brightness, np.random.default_rng(seed))
         e = self.conditions.exposure
         return sensor_noise(
-            image, self.gain, e.shot_noise, e.read_noise, np.random.default_rng(seed + 1)
+            image,
+            self.gain,
+            e.shot_noise,
+            e.read_noise,
+            np.random.default_rng(seed + 1),
+            self.exposure,
         )
 
     @staticmethod
