@@ -106,7 +106,7 @@ def main() -> None:
             rec = recall(np.array(pos), np.array(rot))
             ref = " / ".join(f"{t1_paper[m].get(int(k), float('nan')):.1f}"
                              for m in ("AP-GeM + SIFT", "NetVLAD + SIFT"))  # fmt: skip
-            gain, share = sim.renderer.gain, sim.renderer.exposure
+            gain, share = sim.renderer.gain, sim.renderer.exposure_share
             print(f"{k:g} | {gain:.0f} | {share:.3g} | "
                   + " / ".join(f"{100 * v:.1f}" for v in rec[:3])
                   + f" | {ref}", flush=True)  # fmt: skip

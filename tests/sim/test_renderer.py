@@ -104,10 +104,10 @@ def test_winter_differs_from_summer(small_sim):
 def test_headlights_light_the_road_at_night(small_sim):
     front = Camera("front", SMALL, Extrinsics(z_m=1.6, yaw_deg=0.0, pitch_deg=5.0))
     dark = gray(render(small_sim, Conditions(illumination=Illumination(k=10)), front))
-    assert small_sim.renderer.exposure < 0.01  # far beyond the camera's range
+    assert small_sim.renderer.exposure_share < 0.01  # far beyond the camera's range
     night = Conditions(illumination=Illumination(k=10), headlights=Headlights(on=True))
     lit = gray(render(small_sim, night, front))
-    assert small_sim.renderer.exposure == 1.0  # the meter sees the headlights
+    assert small_sim.renderer.exposure_share == 1.0  # the meter sees the headlights
     road = slice(SMALL.height // 2 + 20, None)
     assert dark[road].mean() < 5 and lit[road].mean() > 20
 

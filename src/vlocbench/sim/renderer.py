@@ -99,7 +99,7 @@ class Renderer:
         # (beyond its range, or fixed) records the share it reached, darker (sensor_noise)
         g = exposure_gain(light, noon, headlight_reading, np.inf)
         self.gain = min(g, e.max_gain) if e.mode == "auto" else 1.0
-        self.exposure = self.gain / g
+        self.exposure_share = self.gain / g
         m.light_diffuse[sc.sun_light_id] = sun_color * light.direct * g
         m.light_ambient[sc.sun_light_id] = np.array([0.92, 0.95, 1.0]) * light.ambient * g
         m.light_specular[sc.sun_light_id] = 0.2 * light.direct * g
@@ -228,7 +228,7 @@ class Renderer:
             e.shot_noise,
             e.read_noise,
             np.random.default_rng(seed + 1),
-            self.exposure,
+            self.exposure_share,
         )
 
     @staticmethod
