@@ -78,6 +78,21 @@ def test_auto_exposure_keeps_dusk_bright(small_sim):
     assert np.abs(np.diff(auto_noisy.astype(float), axis=1)).mean() > 2.5 * grain
 
 
+def test_contrast_falls_with_exponential_fog(small_sim):
+    front = Camera("front", SMALL, Extrinsics(z_m=1.6, yaw_deg=0.0))
+    stds = [
+        gray(
+            render(
+                small_sim,
+                Conditions(weather=Weather(fog_visual_range_m=v, fog_model="exponential")),
+                front,
+            )
+        ).std()
+        for v in (None, 60.0, 10.0)
+    ]
+    assert stds[0] > stds[1] > stds[2], stds
+
+
 def test_paper_fog_starts_at_the_visual_range(small_sim):
     """CARLA's fog as the paper set it: clear before the visual range, opaque soon after; the
     exponential option fogs the road just in front of the camera too."""
