@@ -247,9 +247,14 @@ def _signals_interrupt() -> Iterator[None]:
 
 
 def _report(args: argparse.Namespace) -> int:
+    from vlocbench.bench.experiment import load_experiment
     from vlocbench.bench.report import write_report
 
-    files = write_report(args.output, examples=not args.no_examples)
+    plan = load_experiment(args.experiment) if args.experiment else None
+    files = write_report(args.output, examples=not args.no_examples, plan=plan)
+    print(
+        f"{files.summary.episodes} of the {files.summary.planned} episodes of {files.summary.plan.name}"
+    )
     print(f"tables: {files.markdown}, {files.latex}")
     print(f"report: {files.html.resolve()}")
     return 0
@@ -594,6 +599,9 @@ def _add_experiment_verbs(sub: Any, shared: dict[str, argparse.ArgumentParser]) 
     p = sub.add_parser("report", parents=[shared["report"]],
                        help="tables, figures and an HTML page of a run's results")  # fmt: skip
     p.add_argument("output", type=Path, help="the experiment's output folder")
+    p.add_argument("--experiment", type=Path,
+                   help="report this experiment file over every episode of it in OUTPUT, whichever "
+                        "runs ran them (default: the latest run)")  # fmt: skip
     p.set_defaults(func=_report)
 
 

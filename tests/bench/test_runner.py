@@ -488,21 +488,68 @@ def test_cli_run_and_report_errors(tiny, tmp_path, capsys):
     assert os.path.exists(root / "out" / "report" / "tables.md")
 
 
-def test_episodes_another_sweep_ran_first_count_under_this_plans_setups(tmp_path):
-    """The reduced sweep's k = 0 episodes were first run as a one-level sweep ("default")."""
-    base = {"name": "ill", "towns": ["town10"], "methods": ["sift-vlad"], "repetitions": 1}
-    maps = {("town10", "sift-vlad"): "/nowhere/g/m"}
-    first = load_experiment({**base, "sweep": {"illumination.k": [0]}})
-    second = load_experiment({**base, "sweep": {"illumination.k": [0, 6]}})
-    with ResultStore(tmp_path, "ill") as store:
-        for plan in (first, second):
-            tasks = plan.tasks(maps)
+def _fake_maps(plan):
+    """Map folders named as the runner names them (none is built: the fake episodes need none)."""
+    return {
+        (t, m.name): f"/nowhere/{plan.gallery_folder(t)}-0123456789/{plan.map_name(m)}"
+        for t in plan.spec.towns
+        for m in plan.spec.methods
+    }
+
+
+def _run_fake_plans(root, *plans):
+    """Run ``plans`` in turn into the store at ``root`` as the runner would."""
+    with ResultStore(root, "ill") as store:
+        for plan in plans:
+            tasks = plan.tasks(_fake_maps(plan))
             store.start_run(plan.spec.spec_hash, to_dict(plan), [t.key for t in tasks])
             todo = [t for t in tasks if t.key not in store.done_keys()]
             execute(todo, store, workers=1, runner=run_fake, progress=False)
+
+
+_ILL = {"name": "ill", "towns": ["town10"], "methods": ["sift-vlad"], "repetitions": 1}
+
+
+def test_episodes_another_sweep_ran_first_count_under_this_plans_setups(tmp_path):
+    """The reduced sweep's k = 0 episodes were first run as a one-level sweep ("default")."""
+    first = load_experiment({**_ILL, "sweep": {"illumination.k": [0]}})
+    second = load_experiment({**_ILL, "sweep": {"illumination.k": [0, 6]}})
+    _run_fake_plans(tmp_path, first, second)
     stored, rows = read_latest_run(tmp_path)
     assert {r.setup for r in rows} == {"default", "illumination.k=6"}  # as each run stored them
     summary = summarize(plan_from_stored(stored), rows)
     for label in ("illumination.k=0", "illumination.k=6"):
         cell = summary.cell("town10", "sift-vlad", label)
         assert cell is not None and cell.failure is not None and cell.recall is not None, label
+
+
+def test_a_sweep_run_in_parts_is_reported_whole(tmp_path, capsys):
+    """A sweep run a level at a time (as on a small machine): the latest run's report shows its
+    level, the experiment's report every level; episodes from another gallery do not count."""
+    from vlocbench.bench.report import write_report
+    from vlocbench.cli import main
+
+    whole = {**_ILL, "sweep": {"illumination.k": [0, 6]}}
+    (tmp_path / "ill.yaml").write_text(yaml.safe_dump(whole))
+    parts = [load_experiment({**_ILL, "sweep": {"illumination.k": [k]}}) for k in (6, 0)]
+    other_gallery = load_experiment({**whole, "gallery": {"spacing_m": 4.0}})
+    _run_fake_plans(tmp_path, other_gallery, *parts)
+    latest = write_report(tmp_path, examples=False).summary
+    assert [s.label for s in latest.setups] == ["default"] and latest.episodes == 3
+
+    plan = load_experiment(tmp_path / "ill.yaml")
+    files = write_report(tmp_path, examples=False, plan=plan)
+    summary, planned = files.summary, plan.tasks(_fake_maps(plan))
+    assert summary.episodes == summary.planned == len(planned) == 5  # (recall, failure) x 2, base
+    for label in ("illumination.k=0", "illumination.k=6"):
+        cell = summary.cell("town10", "sift-vlad", label)
+        assert cell is not None and cell.failure is not None and cell.recall is not None, label
+        assert cell.keys <= {t.key for t in planned}  # none of the other gallery's
+    assert "5 of 5 episodes" in files.html.read_text()
+
+    assert main(["report", str(tmp_path), "--experiment", str(tmp_path / "ill.yaml"),
+                 "--no-examples"]) == 0  # fmt: skip
+    assert "5 of the 5 episodes of ill" in capsys.readouterr().out
+    (tmp_path / "t01.yaml").write_text(yaml.safe_dump({**whole, "towns": ["town01"]}))
+    assert main(["report", str(tmp_path), "--experiment", str(tmp_path / "t01.yaml")]) == 1
+    assert "holds no episode of experiment 'ill'" in capsys.readouterr().err

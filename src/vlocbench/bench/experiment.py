@@ -31,7 +31,7 @@ from vlocbench.bench.episode import EPISODE_VERSION, EpisodeConfig
 from vlocbench.config import config_hash, from_dict, load_yaml, require, to_dict
 from vlocbench.errors import ConfigError, UnknownNameError
 from vlocbench.loc.localizer import LocalizerConfig
-from vlocbench.loc.mapping import MappingConfig
+from vlocbench.loc.mapping import MappingConfig, map_name
 from vlocbench.loc.registry import METHODS, MethodConf, method_conf
 from vlocbench.sim import Camera, Conditions, builtin_town_names, gallery_camera
 from vlocbench.sim.scene import SCENE_VERSION
@@ -275,6 +275,15 @@ class ExperimentPlan:
         return config_hash(
             (to_dict(_town_spec(town)), s.route_length_m, s.gallery, SCENE_VERSION), 10
         )
+
+    def gallery_folder(self, town: str) -> str:
+        """The folder of a town's gallery in the cache: ``TOWN-GALLERYKEY``. Its maps lie under
+        this name and the gallery's content hash (:attr:`~vlocbench.loc.Gallery.identity`)."""
+        return f"{_town_spec(town).name}-{self.gallery_key(town)}"
+
+    def map_name(self, method: MethodSpec) -> str:
+        """The folder of a method's map, under its gallery's."""
+        return map_name(method.name, method.conf, method.mapping or self.spec.mapping)
 
     def tasks(self, map_dirs: Mapping[tuple[str, str], str]) -> list[EpisodeTask]:
         """Every episode, keyed; ``map_dirs[(town, method name)]`` gives the maps. Baseline

@@ -28,11 +28,11 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from vlocbench.bench.experiment import plan_from_stored
+from vlocbench.bench.experiment import ExperimentPlan, plan_from_stored
 from vlocbench.bench.metrics import PLACE_RADII_M
 from vlocbench.bench.paper import FACTOR_OF_AXIS, PaperTable, paper_results, shape
-from vlocbench.bench.store import EpisodeRow, read_latest_run
-from vlocbench.bench.summary import BASELINE, Cell, Summary, summarize
+from vlocbench.bench.store import EpisodeRow, StoreError, read_episodes, read_latest_run
+from vlocbench.bench.summary import BASELINE, Cell, Summary, stored_tasks, summarize
 from vlocbench.bench.view import VIEW_DIR
 
 REPORT_DIR = "report"
@@ -642,7 +642,8 @@ def _write_page(summary: Summary, rows: Sequence[EpisodeRow], tables: list[tuple
     page.write_text(
         _page_template().substitute(
             title=html.escape(spec.name),
-            episodes=len(rows),
+            episodes=summary.episodes,
+            planned=summary.planned,
             errors=len(summary.errors),
             spec_hash=spec.spec_hash,
             towns=html.escape(", ".join(summary.town_names[t] for t in summary.towns)),
@@ -661,10 +662,20 @@ def _write_page(summary: Summary, rows: Sequence[EpisodeRow], tables: list[tuple
     return page
 
 
-def write_report(output_dir: str | Path, examples: bool = True) -> ReportFiles:
-    """Write the tables, figures and the HTML page of the latest run in ``output_dir``."""
-    stored, rows = read_latest_run(output_dir)
-    summary = summarize(plan_from_stored(stored), rows)
+def write_report(
+    output_dir: str | Path, examples: bool = True, plan: ExperimentPlan | None = None
+) -> ReportFiles:
+    """Write the tables, figures and the HTML page of the latest run in ``output_dir``, or of
+    ``plan`` over every episode of it stored there (run in parts, by several runs)."""
+    if plan is None:
+        stored, rows = read_latest_run(output_dir)
+        plan = plan_from_stored(stored)
+    else:
+        rows = read_episodes(output_dir)
+        rows = [r for r in rows if r.key in {t.key for t in stored_tasks(plan, rows)}]
+        if not rows:
+            raise StoreError(f"{output_dir} holds no episode of experiment {plan.name!r}")
+    summary = summarize(plan, rows)
     out = Path(output_dir) / REPORT_DIR
     out.mkdir(parents=True, exist_ok=True)
     tables = _tables(summary)

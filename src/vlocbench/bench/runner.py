@@ -274,7 +274,7 @@ def _map_job(town_name: str, gallery: Gallery, method: MethodSpec, mapping: Mapp
 
 
 def _gallery_dir(plan: ExperimentPlan, town_name: str, cache: Path) -> Path:
-    return cache / "galleries" / f"{town_named(town_name).name}-{plan.gallery_key(town_name)}"
+    return cache / "galleries" / plan.gallery_folder(town_name)
 
 
 def _gallery(plan: ExperimentPlan, town_name: str, cache: Path, bars: _StageBars) -> Gallery:

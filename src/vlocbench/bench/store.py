@@ -133,24 +133,36 @@ def _run_rows(db: sqlite3.Connection, run_hash: str) -> list[EpisodeRow]:
     return [_episode_row(*row) for row in cur]
 
 
-def read_latest_run(output_dir: str | Path) -> tuple[dict[str, Any], list[EpisodeRow]]:
-    """The latest run's resolved spec and episodes, read-only and without the lock (a run may be
-    writing meanwhile)."""
+@contextmanager
+def _read_only(output_dir: str | Path) -> Iterator[sqlite3.Connection]:
+    """The store of ``output_dir``, read-only and without the lock (a run may be writing
+    meanwhile)."""
     db_path = Path(output_dir) / DB_FILE
     if not db_path.is_file():
         raise StoreError(f"{output_dir} holds no vlocbench results ({DB_FILE} is missing)")
     try:
         db = sqlite3.connect(f"file:{db_path}?mode=ro", uri=True)
         try:
-            last = _latest_run(db)
-            if last is None:
-                raise StoreError(f"{output_dir} has no run yet")
-            rows = _run_rows(db, last[0])
+            yield db
         finally:
             db.close()
     except sqlite3.DatabaseError as exc:
         raise StoreError(f"{db_path} is not a vlocbench store: {exc}") from None
-    return json.loads(last[1]), rows
+
+
+def read_latest_run(output_dir: str | Path) -> tuple[dict[str, Any], list[EpisodeRow]]:
+    """The latest run's resolved spec and episodes."""
+    with _read_only(output_dir) as db:
+        last = _latest_run(db)
+        if last is None:
+            raise StoreError(f"{output_dir} has no run yet")
+        return json.loads(last[1]), _run_rows(db, last[0])
+
+
+def read_episodes(output_dir: str | Path) -> list[EpisodeRow]:
+    """Every stored episode, whichever run asked for it, by key."""
+    with _read_only(output_dir) as db:
+        return [_episode_row(*row) for row in db.execute("SELECT * FROM episodes ORDER BY key")]
 
 
 def _columns(result: EpisodeResult) -> tuple[dict[str, Any], dict[str, Any]]:

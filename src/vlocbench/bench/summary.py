@@ -12,11 +12,12 @@ import json
 from collections import defaultdict
 from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from vlocbench.bench.experiment import ExperimentPlan, ExperimentSpec, Setup
+from vlocbench.bench.experiment import EpisodeTask, ExperimentPlan, ExperimentSpec, Setup
 from vlocbench.bench.metrics import (
     FailureRate,
     Fragmentation,
@@ -65,6 +66,8 @@ class Summary:
     axis: tuple[str, ...]  # the swept keys
     cells: dict[tuple[str, str, str], Cell]  # (town, method, setup label)
     errors: tuple[EpisodeRow, ...]
+    episodes: int  # the episodes summarized, with errors or not
+    planned: int  # the episodes the plan consists of (more than the above: a run not finished)
 
     @property
     def spec(self) -> ExperimentSpec:
@@ -128,20 +131,45 @@ def _cell(key: tuple[str, str, str], group: list[EpisodeRow], errors: int) -> Ce
 
 
 class _MapDirs(dict):
-    """The map folders the stored episodes name; a method without episodes gets a placeholder
+    """Map folders by (town, method name); a method without stored episodes gets a placeholder
     (its keys then match no row)."""
 
     def __missing__(self, key: tuple[str, str]) -> str:
         return "/no-episodes"
 
 
+def stored_tasks(plan: ExperimentPlan, rows: Sequence[EpisodeRow]) -> list[EpisodeTask]:
+    """The tasks of ``plan`` that ``rows`` hold, whichever run (of this plan or another that
+    shares its episodes) ran them. A task's key names its map, so the plan's maps are found among
+    those the rows name: built from the plan's gallery (its folder; any content hash) with the
+    method's configuration. Where a gallery was captured again, its episodes under every copy
+    count."""
+    wanted = {
+        (town, m.name): (plan.gallery_folder(town), plan.map_name(m))
+        for town in plan.spec.towns
+        for m in plan.spec.methods
+        if m.needs_map
+    }
+    found: dict[tuple[str, str], list[str]] = defaultdict(list)
+    for r in rows:
+        map_dir, at = r.config.get("map_dir"), (r.config["town"], r.method)
+        if not map_dir or at not in wanted or map_dir in found[at]:
+            continue
+        gallery, name = wanted[at]
+        if Path(map_dir).name == name and Path(map_dir).parent.name.startswith(gallery + "-"):
+            found[at].append(map_dir)
+    keys = {r.key for r in rows}
+    tasks: dict[str, EpisodeTask] = {}
+    for i in range(max(map(len, found.values()), default=1)):  # a task depends on one map only
+        map_dirs = _MapDirs({at: dirs[min(i, len(dirs) - 1)] for at, dirs in found.items()})
+        tasks |= {t.key: t for t in plan.tasks(map_dirs) if t.key in keys}
+    return list(tasks.values())
+
+
 def _setup_labels(plan: ExperimentPlan, rows: Sequence[EpisodeRow]) -> dict[str, str]:
     """Each episode key's setup label in *this* plan: an episode another experiment ran first
     (same key, shared through the store) is stored under that experiment's label."""
-    map_dirs = _MapDirs(
-        ((r.config["town"], r.method), r.config["map_dir"]) for r in rows if r.config.get("map_dir")
-    )
-    return {t.key: t.setup.label for t in plan.tasks(map_dirs) if t.method is not None}
+    return {t.key: t.setup.label for t in stored_tasks(plan, rows) if t.method is not None}
 
 
 def summarize(plan: ExperimentPlan, rows: Sequence[EpisodeRow]) -> Summary:
@@ -178,4 +206,6 @@ def summarize(plan: ExperimentPlan, rows: Sequence[EpisodeRow]) -> Summary:
         axis=plan.axis,
         cells=cells,
         errors=tuple(r for r in rows if r.status != "ok"),
+        episodes=len(rows),
+        planned=len(plan.tasks(_MapDirs())),
     )

@@ -71,12 +71,16 @@ class MapReport:
     seconds: dict[str, float] = field(default_factory=dict)
 
 
+def map_name(method: str, conf: MethodConf, mapping: MappingConfig) -> str:
+    """``METHOD-HASH``: a map's folder name, the hash of its configuration including the
+    arguments of the method's presets."""
+    return f"{method}-{config_hash((conf, mapping, stage_params(conf)), 8)}"
+
+
 def default_map_dir(root: str | Path, gallery: Gallery, method: str, conf: MethodConf,
                     mapping: MappingConfig) -> Path:  # fmt: skip
-    """``root/GALLERY-ID/METHOD-HASH``: one folder per (gallery, method, configuration), the
-    configuration including the arguments of the method's presets."""
-    key = (conf, mapping, stage_params(conf))
-    return Path(root) / gallery.identity / f"{method}-{config_hash(key, 8)}"
+    """``root/GALLERY-ID/METHOD-HASH``: one folder per (gallery, method, configuration)."""
+    return Path(root) / gallery.identity / map_name(method, conf, mapping)
 
 
 # -- HDF5 caches ---------------------------------------------------------------------------------
