@@ -94,11 +94,13 @@ def test_a_map_build_killed_mid_write_is_finished_by_a_rerun(gallery, tmp_path):
 
     out = tmp_path / "map"
     first = build_map(gallery, method_conf("sift-vlad"), out)
+    (out / "map.json").rename(tmp_path / "map.json")  # killed before it finished
     for cache in ("features.h5", "matches.h5", "global.h5"):  # what a kill -9 mid-write leaves
         if (out / cache).exists():
             (out / cache).write_bytes(b"\x89HDF\r\n\x1a\n" + b"\0" * 64)
     again = build_map(gallery, method_conf("sift-vlad"), out)
     assert again.points == first.points and again.images == first.images
+    assert again.seconds != first.seconds  # built again, not read back
     # a finished map's folder keeps its caches to itself: another method is refused at once
     with pytest.raises(LocalizationError, match="another method, stages"):
         build_map(gallery, method_conf("orb-teblid"), out)
@@ -149,3 +151,30 @@ def test_a_colmap_model_a_gallery_cannot_take_is_a_clear_error(gallery, tmp_path
         import_colmap(model, gallery.root / "images", tmp_path / "out")
     with pytest.raises(LocalizationError, match="is not a COLMAP model"):
         import_colmap(tmp_path / "nothing", gallery.root / "images", tmp_path / "out")
+
+
+def test_a_finished_map_is_returned_untouched_and_one_process_builds_at_a_time(gallery, tmp_path):
+    import fcntl
+    import threading
+
+    from vlocbench.loc.registry import method_conf
+
+    conf, out = method_conf("sift-prior"), tmp_path / "map"
+    built: list = []
+    with open(_lock_file(out), "w") as lock:  # another process is building this map
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        waiting = threading.Thread(target=lambda: built.append(build_map(gallery, conf, out)))
+        waiting.start()
+        waiting.join(timeout=2.0)
+        assert waiting.is_alive() and not (out / "features.h5").exists()
+    waiting.join()
+    [first] = built
+    stamps = {p: p.stat().st_mtime_ns for p in out.rglob("*") if p.is_file()}
+    again = build_map(gallery, conf, out)
+    assert again == first  # the build's own report, times included
+    assert stamps == {p: p.stat().st_mtime_ns for p in out.rglob("*") if p.is_file()}
+
+
+def _lock_file(out):
+    out.mkdir(parents=True)
+    return out / ".building"

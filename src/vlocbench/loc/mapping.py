@@ -8,14 +8,18 @@ missing (or with ``overwrite``):
     pairs.txt     mapping pairs: the nearest gallery poses (default) or the top retrievals
     matches.h5    matches per pair, filtered by the epipolar geometry of the known poses
     database.db, sfm/   the COLMAP database and model (pycolmap ``triangulate_points``)
-    map.json      method, gallery, statistics and stage times
+    map.json      method, gallery, statistics and stage times; written last, so a folder with it
+                  holds a finished map, which ``build_map`` returns as it is
 
-A map is keyed by (gallery, method, configuration): :func:`default_map_dir` names its folder so.
+One process builds a map folder at a time (``.building`` is its lock); another that asks for the
+same map waits, then finds it finished. A map is keyed by (gallery, method, configuration): :func:`default_map_dir` names its folder so.
 """
 
 from __future__ import annotations
 
+import fcntl
 import json
+import logging
 import shutil
 import time
 from collections.abc import Callable, Iterator
@@ -42,6 +46,8 @@ from vlocbench.loc.registry import (
     stage_params,
 )
 from vlocbench.loc.retrieval import nearest_poses, top_k
+
+logger = logging.getLogger(__name__)
 
 MAP_FILE = "map.json"
 MATCH_CHUNK = 64  # pairs matched between writes to the cache (what a kill can lose)
@@ -293,13 +299,15 @@ def _identity(gallery: Gallery, conf: MethodConf, mapping: MappingConfig) -> dic
     }))  # fmt: skip
 
 
-def _check_same_map(out: Path, identity: dict[str, Any]) -> None:
-    """A folder that holds a finished map of something else is refused: its cached stages
-    would be mixed into this one. (Maps built before ``stages`` was kept are checked without.)"""
+def _finished_map(out: Path, identity: dict[str, Any]) -> MapReport | None:
+    """The report of the map finished in ``out``, if it is this one (None: not finished, or
+    finished before its report was kept). A folder that holds a finished map of something else is
+    refused: its cached stages would be mixed into this one. (Maps built before ``stages`` was
+    kept are checked without.)"""
     try:
         built = json.loads((out / MAP_FILE).read_text())
     except FileNotFoundError:
-        return
+        return None
     except json.JSONDecodeError as exc:
         raise LocalizationError(f"{out / MAP_FILE} is corrupt: {exc!r}") from None
     differ = [k for k, v in identity.items() if k in built and built[k] != v]
@@ -308,6 +316,21 @@ def _check_same_map(out: Path, identity: dict[str, Any]) -> None:
             f"{out} holds a map built with another {', '.join(differ)} ({built.get('method')}); "
             "build in another folder, or pass overwrite (--overwrite) to rebuild it"
         )
+    return MapReport(**built["report"]) if "report" in built else None
+
+
+@contextmanager
+def _one_builder(out: Path) -> Iterator[None]:
+    """Hold ``out`` while building in it: two processes writing one map's HDF5 caches would lock
+    each other out, and a cache that does not open is started over."""
+    out.mkdir(parents=True, exist_ok=True)
+    with open(out / ".building", "a") as lock:
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            logger.info(f"{out}: another process is building this map; waiting for it")
+            fcntl.flock(lock, fcntl.LOCK_EX)
+        yield  # the lock goes with the file's closing
 
 
 def map_info(map_dir: str | Path) -> tuple[MethodConf, Path]:
@@ -415,13 +438,18 @@ def build_map(
     overwrite: bool = False,
     progress: Progress | None = None,
 ) -> MapReport:
-    """Build (or finish building) the map of ``gallery`` with method ``conf`` in ``out_dir``."""
+    """Build (or finish building) the map of ``gallery`` with method ``conf`` in ``out_dir``; a
+    finished one is returned as it is (its report is the build's)."""
     mapping = mapping or MappingConfig()
     out = Path(out_dir)
     identity = _identity(gallery, conf, mapping)
-    if not overwrite:
-        _check_same_map(out, identity)
-    out.mkdir(parents=True, exist_ok=True)
+    with _one_builder(out):
+        finished = None if overwrite else _finished_map(out, identity)
+        return finished or _build(gallery, conf, out, mapping, identity, overwrite, progress)
+
+
+def _build(gallery: Gallery, conf: MethodConf, out: Path, mapping: MappingConfig,
+           identity: dict[str, Any], overwrite: bool, progress: Progress | None) -> MapReport:  # fmt: skip
     pycolmap.logging.minloglevel = 2
     seconds = {}
     t = time.perf_counter()
