@@ -453,7 +453,10 @@ def failure_vs_recall_figure(summary: Summary, path: Path) -> Path:
     ax.set_xlim(0, 100)
     ax.set_ylim(bottom=0)
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
+    if ax.collections:
+        ax.legend(fontsize=8)
+    else:  # no setup has both recall and failure episodes yet
+        ax.text(50, 0.5, "no setup with both recall and failure episodes", ha="center")
     ax.set_title("failure rate against recall")
     return _save(fig, path)
 
