@@ -296,6 +296,28 @@ def test_galleries_and_maps_made_side_by_side_equal_those_made_in_turn(tiny, tmp
     assert points[0] and points[0] == points[1]
 
 
+def test_a_gallery_another_process_is_capturing_is_waited_for(tiny):
+    import fcntl
+    import threading
+
+    from vlocbench.bench.runner import prepare_gallery
+    from vlocbench.locks import LOCK_FILE
+
+    root, _ = tiny
+    plan = load_experiment(root / "tiny.yaml")
+    town = plan.spec.towns[0]
+    folder = root / "cache" / "galleries" / plan.gallery_folder(town)
+    got: list = []
+    with open(folder / LOCK_FILE, "a") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        waiting = threading.Thread(target=lambda: got.append(prepare_gallery(plan, town)))
+        waiting.start()
+        waiting.join(timeout=1.0)
+        assert waiting.is_alive() and not got  # not even a finished gallery is read meanwhile
+    waiting.join()
+    assert got[0].root == folder and len(got[0]) > 10
+
+
 def test_report_of_a_run(tiny):
     from vlocbench.bench.report import write_report
 

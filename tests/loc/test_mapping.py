@@ -176,5 +176,7 @@ def test_a_finished_map_is_returned_untouched_and_one_process_builds_at_a_time(g
 
 
 def _lock_file(out):
+    from vlocbench.locks import LOCK_FILE
+
     out.mkdir(parents=True)
-    return out / ".building"
+    return out / LOCK_FILE

@@ -34,6 +34,7 @@ from vlocbench.config import to_dict
 from vlocbench.errors import ConfigError
 from vlocbench.loc.gallery import GALLERY_FILE, Gallery
 from vlocbench.loc.mapping import MAP_FILE, MappingConfig, build_map, default_map_dir
+from vlocbench.locks import building
 from vlocbench.sim import Simulator
 
 logger = logging.getLogger(__name__)
@@ -280,16 +281,17 @@ def _gallery_dir(plan: ExperimentPlan, town_name: str, cache: Path) -> Path:
 def _gallery(plan: ExperimentPlan, town_name: str, cache: Path, bars: _StageBars) -> Gallery:
     spec, town = plan.spec, town_named(town_name)
     gallery_dir = _gallery_dir(plan, town_name, cache)
-    if not (gallery_dir / GALLERY_FILE).exists():
-        logger.info(f"{town.name}: capturing the gallery in {gallery_dir}")
-        t = time.perf_counter()
-        route = route_named(town_name, spec.route_length_m)
-        shots = int(route.length_m / spec.gallery.spacing_m) + 1
-        with Simulator(town, spec.gallery.conditions) as sim:
-            capture_gallery(sim, route, (spec.gallery.camera,), gallery_dir,
-                            spec.gallery.spacing_m, spec.gallery.speed_mps,
-                            progress=lambda n: bars(f"{town.name} gallery", n, shots))  # fmt: skip
-        logger.info(f"{town.name}: gallery captured in {time.perf_counter() - t:.0f} s")
+    with building(gallery_dir, "a gallery"):
+        if not (gallery_dir / GALLERY_FILE).exists():
+            logger.info(f"{town.name}: capturing the gallery in {gallery_dir}")
+            t = time.perf_counter()
+            route = route_named(town_name, spec.route_length_m)
+            shots = int(route.length_m / spec.gallery.spacing_m) + 1
+            with Simulator(town, spec.gallery.conditions) as sim:
+                capture_gallery(sim, route, (spec.gallery.camera,), gallery_dir,
+                                spec.gallery.spacing_m, spec.gallery.speed_mps,
+                                progress=lambda n: bars(f"{town.name} gallery", n, shots))  # fmt: skip
+            logger.info(f"{town.name}: gallery captured in {time.perf_counter() - t:.0f} s")
     return Gallery.load(gallery_dir)
 
 

@@ -11,15 +11,13 @@ missing (or with ``overwrite``):
     map.json      method, gallery, statistics and stage times; written last, so a folder with it
                   holds a finished map, which ``build_map`` returns as it is
 
-One process builds a map folder at a time (``.building`` is its lock); another that asks for the
-same map waits, then finds it finished. A map is keyed by (gallery, method, configuration): :func:`default_map_dir` names its folder so.
+One process builds a map folder at a time (:func:`vlocbench.locks.building`); another that asks for
+the same map waits, then finds it finished. A map is keyed by (gallery, method, configuration): :func:`default_map_dir` names its folder so.
 """
 
 from __future__ import annotations
 
-import fcntl
 import json
-import logging
 import shutil
 import time
 from collections.abc import Callable, Iterator
@@ -46,8 +44,7 @@ from vlocbench.loc.registry import (
     stage_params,
 )
 from vlocbench.loc.retrieval import nearest_poses, top_k
-
-logger = logging.getLogger(__name__)
+from vlocbench.locks import building
 
 MAP_FILE = "map.json"
 MATCH_CHUNK = 64  # pairs matched between writes to the cache (what a kill can lose)
@@ -319,20 +316,6 @@ def _finished_map(out: Path, identity: dict[str, Any]) -> MapReport | None:
     return MapReport(**built["report"]) if "report" in built else None
 
 
-@contextmanager
-def _one_builder(out: Path) -> Iterator[None]:
-    """Hold ``out`` while building in it: two processes writing one map's HDF5 caches would lock
-    each other out, and a cache that does not open is started over."""
-    out.mkdir(parents=True, exist_ok=True)
-    with open(out / ".building", "a") as lock:
-        try:
-            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            logger.info(f"{out}: another process is building this map; waiting for it")
-            fcntl.flock(lock, fcntl.LOCK_EX)
-        yield  # the lock goes with the file's closing
-
-
 def map_info(map_dir: str | Path) -> tuple[MethodConf, Path]:
     """(method, gallery folder) a map was built with, from its ``map.json``."""
     path = Path(map_dir) / MAP_FILE
@@ -443,7 +426,7 @@ def build_map(
     mapping = mapping or MappingConfig()
     out = Path(out_dir)
     identity = _identity(gallery, conf, mapping)
-    with _one_builder(out):
+    with building(out, "a map"):
         finished = None if overwrite else _finished_map(out, identity)
         return finished or _build(gallery, conf, out, mapping, identity, overwrite, progress)
 
