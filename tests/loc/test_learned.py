@@ -136,6 +136,27 @@ def test_batched_lighterglue_gives_each_pair_its_own_matches(offline, gallery):
         assert len(same) >= 0.98 * max(len(x), len(y))  # floating point's order of sums only
 
 
+def test_learned_features_do_not_depend_on_the_callers_threads(offline, gallery):
+    """A map built alone in the driver (every core) and one built in a pool worker (one thread)
+    must be the same map: the float sums of a forward pass round by their split over threads."""
+    from vlocbench.loc.registry import build_features, build_retrieval
+
+    image = gallery.load_image(gallery.names[10])
+    extractor, retrieval = build_features("xfeat"), build_retrieval("effnet-gem")
+    before = torch.get_num_threads()
+    try:
+        runs = []
+        for threads in (1, 2):
+            torch.set_num_threads(threads)
+            f = extractor.extract(image)
+            runs.append((f.descriptors, retrieval.describe(image, f)))
+            assert torch.get_num_threads() == threads  # the caller's setting is kept
+    finally:
+        torch.set_num_threads(before)
+    for one, two in zip(*runs, strict=True):
+        assert np.array_equal(one, two)
+
+
 def test_the_device_is_auto_cpu_or_cuda(monkeypatch):
     from vlocbench.errors import ConfigError, UnknownNameError
     from vlocbench.loc.learned import EfficientNetGem, resolve_device

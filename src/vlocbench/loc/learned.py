@@ -17,7 +17,8 @@ from __future__ import annotations
 import importlib.util
 import os
 import threading
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -29,6 +30,11 @@ from vlocbench.errors import ConfigError, UnknownNameError
 from vlocbench.loc.features import Features, check_image
 
 _LOCK = threading.Lock()
+# Intra-op threads of every forward pass. Float sums split over threads round differently (XFeat's
+# descriptors moved by 3e-7 between 1 and 2 threads, enough to change a closed-loop drive), so the
+# results would depend on the cores and on whether a map was built alone or beside another. One
+# thread, as each pool worker has anyway.
+TORCH_THREADS = 1
 
 
 def _torch() -> Any:
@@ -39,6 +45,19 @@ def _torch() -> Any:
             "method", "learned methods need PyTorch: pip install torch==2.13.0 (CPU) first"
         ) from None
     return torch
+
+
+@contextmanager
+def _inference() -> Iterator[None]:
+    """Run a forward pass: one at a time, without autograd, on ``TORCH_THREADS`` threads."""
+    torch = _torch()
+    with _LOCK, torch.inference_mode():
+        threads = torch.get_num_threads()
+        torch.set_num_threads(TORCH_THREADS)
+        try:
+            yield
+        finally:
+            torch.set_num_threads(threads)
 
 
 def _weights(package: str, *parts: str) -> Path:
@@ -100,8 +119,7 @@ class AlikedExtractor:
         self.net = net.eval().to(self.device)
 
     def extract(self, image: NDArray[np.uint8]) -> Features:
-        torch = _torch()
-        with _LOCK, torch.inference_mode():
+        with _inference():
             f = self.net(_tensor(image, self.device))[0]
         return Features(
             _numpy(f.keypoints), _numpy(f.descriptors), _numpy(f.keypoint_scores).reshape(-1)
@@ -124,9 +142,8 @@ class DiskExtractor:
         self.net = net.eval().to(self.device)
 
     def extract(self, image: NDArray[np.uint8]) -> Features:
-        torch = _torch()
         x = _tensor(image, self.device)
-        with _LOCK, torch.inference_mode():
+        with _inference():
             f = self.net(x, n=self.max_keypoints, pad_if_not_divisible=True)[0]
         return Features(
             _numpy(f.keypoints), _numpy(f.descriptors), _numpy(f.detection_scores).reshape(-1)
@@ -152,8 +169,7 @@ class XFeatExtractor:
         self.net.net.to(self.device)
 
     def extract(self, image: NDArray[np.uint8]) -> Features:
-        torch = _torch()
-        with _LOCK, torch.inference_mode():
+        with _inference():
             f = self.net.detectAndCompute(_tensor(image, self.device))[0]
         return Features(_numpy(f["keypoints"]), _numpy(f["descriptors"]), _numpy(f["scores"]))
 
@@ -243,7 +259,7 @@ class LightGlueMatcher:
                 sizes = np.stack([
                     np.maximum(a.keypoints.max(0), b.keypoints.max(0)) + 1 for a, b in zip(a_s, b_s)
                 ]).astype(np.float32)  # fmt: skip
-                with _LOCK, torch.inference_mode():
+                with _inference():
                     result = self.net({"image0": side(a_s, sizes), "image1": side(b_s, sizes)})
                 for k, m0 in zip(batch, result["matches0"].cpu().numpy(), strict=True):
                     keep = np.flatnonzero(m0 >= 0)
@@ -294,7 +310,6 @@ class EfficientNetGem:
     def describe(self, image: NDArray[np.uint8], features: Features) -> NDArray[np.float32]:
         import cv2
 
-        torch = _torch()
         h, w = image.shape[:2]
         small = cv2.resize(
             check_image(image),
@@ -302,7 +317,7 @@ class EfficientNetGem:
             interpolation=cv2.INTER_AREA,
         )
         x = (_tensor(small, self.device) - self.mean) / self.std
-        with _LOCK, torch.inference_mode():
+        with _inference():
             fmap = self.net.extract_features(x)
             v = _numpy(fmap.clamp(min=1e-6).pow(self.p).mean(dim=(2, 3)).pow(1.0 / self.p)[0])
         return (v / max(float(np.linalg.norm(v)), 1e-12)).astype(np.float32)
