@@ -86,3 +86,25 @@ def query_pose(stretch, index, forward_m=1.0, left_m=0.3, yaw_rad=0.02):
     xy = stretch.xy[index] + forward_m * np.array([np.cos(yaw), np.sin(yaw)])
     xy += left_m * np.array([-np.sin(yaw), np.cos(yaw)])
     return float(xy[0]), float(xy[1]), yaw + yaw_rad
+
+
+def call_behind_build_lock(folder, call, while_held=lambda: None, wait_s=1.0):
+    """``call()`` in a thread while ``folder``'s build lock (:mod:`vlocbench.locks`) is held as
+    another process building there holds it: the call must still wait after ``wait_s`` (and
+    ``while_held()`` checks what it has not done); returns its result once the lock is let go."""
+    import fcntl
+    import threading
+
+    from vlocbench.locks import LOCK_FILE
+
+    folder.mkdir(parents=True, exist_ok=True)
+    got: list = []
+    with open(folder / LOCK_FILE, "a") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        waiting = threading.Thread(target=lambda: got.append(call()))
+        waiting.start()
+        waiting.join(timeout=wait_s)
+        assert waiting.is_alive() and not got
+        while_held()
+    waiting.join()
+    return got[0]

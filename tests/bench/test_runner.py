@@ -12,7 +12,7 @@ import pytest
 import yaml
 
 from tests.bench.fakes import CONTROL_ENV, run_fake
-from tests.conftest import small_spec
+from tests.conftest import call_behind_build_lock, small_spec
 from vlocbench.bench.experiment import load_experiment, plan_from_stored
 from vlocbench.bench.runner import execute, prepare_maps, run_experiment
 from vlocbench.bench.store import DB_FILE, ResultStore, read_latest_run
@@ -297,25 +297,15 @@ def test_galleries_and_maps_made_side_by_side_equal_those_made_in_turn(tiny, tmp
 
 
 def test_a_gallery_another_process_is_capturing_is_waited_for(tiny):
-    import fcntl
-    import threading
-
+    """Not even a finished gallery is read while another process holds its folder."""
     from vlocbench.bench.runner import prepare_gallery
-    from vlocbench.locks import LOCK_FILE
 
     root, _ = tiny
     plan = load_experiment(root / "tiny.yaml")
     town = plan.spec.towns[0]
     folder = root / "cache" / "galleries" / plan.gallery_folder(town)
-    got: list = []
-    with open(folder / LOCK_FILE, "a") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)
-        waiting = threading.Thread(target=lambda: got.append(prepare_gallery(plan, town)))
-        waiting.start()
-        waiting.join(timeout=1.0)
-        assert waiting.is_alive() and not got  # not even a finished gallery is read meanwhile
-    waiting.join()
-    assert got[0].root == folder and len(got[0]) > 10
+    gallery = call_behind_build_lock(folder, lambda: prepare_gallery(plan, town))
+    assert gallery.root == folder and len(gallery) > 10
 
 
 def test_report_of_a_run(tiny):

@@ -3,6 +3,7 @@ import json
 import numpy as np
 import pytest
 
+from tests.conftest import call_behind_build_lock
 from tests.loc.plugins import CountingSift
 from vlocbench.errors import ConfigError, LocalizationError, UnknownNameError
 from vlocbench.loc.gallery import Gallery
@@ -154,29 +155,20 @@ def test_a_colmap_model_a_gallery_cannot_take_is_a_clear_error(gallery, tmp_path
 
 
 def test_a_finished_map_is_returned_untouched_and_one_process_builds_at_a_time(gallery, tmp_path):
-    import fcntl
-    import threading
-
     from vlocbench.loc.registry import method_conf
 
     conf, out = method_conf("sift-prior"), tmp_path / "map"
-    built: list = []
-    with open(_lock_file(out), "w") as lock:  # another process is building this map
-        fcntl.flock(lock, fcntl.LOCK_EX)
-        waiting = threading.Thread(target=lambda: built.append(build_map(gallery, conf, out)))
-        waiting.start()
-        waiting.join(timeout=2.0)
-        assert waiting.is_alive() and not (out / "features.h5").exists()
-    waiting.join()
-    [first] = built
+    first = call_behind_build_lock(
+        out,
+        lambda: build_map(gallery, conf, out),
+        while_held=lambda: _not_built_yet(out),
+        wait_s=2.0,
+    )
     stamps = {p: p.stat().st_mtime_ns for p in out.rglob("*") if p.is_file()}
     again = build_map(gallery, conf, out)
     assert again == first  # the build's own report, times included
     assert stamps == {p: p.stat().st_mtime_ns for p in out.rglob("*") if p.is_file()}
 
 
-def _lock_file(out):
-    from vlocbench.locks import LOCK_FILE
-
-    out.mkdir(parents=True)
-    return out / LOCK_FILE
+def _not_built_yet(out):
+    assert not (out / "features.h5").exists()

@@ -675,7 +675,8 @@ def write_report(
         plan = plan_from_stored(stored)
     else:
         rows = read_episodes(output_dir)
-        rows = [r for r in rows if r.key in {t.key for t in stored_tasks(plan, rows)}]
+        keys = {t.key for t in stored_tasks(plan, rows)}
+        rows = [r for r in rows if r.key in keys]
         if not rows:
             raise StoreError(f"{output_dir} holds no episode of experiment {plan.name!r}")
     summary = summarize(plan, rows)
