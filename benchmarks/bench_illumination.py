@@ -27,7 +27,7 @@ import numpy as np
 
 from vlocbench.bench.experiment import load_experiment
 from vlocbench.bench.localizer import LocalizationQuery
-from vlocbench.bench.metrics import recall
+from vlocbench.bench.metrics import confident_wrong, place_recall, recall
 from vlocbench.bench.paper import paper_results
 from vlocbench.bench.runner import prepare_maps
 from vlocbench.bench.towns import route_named, town_named
@@ -86,12 +86,17 @@ def main() -> None:
         f"{args.town}, {args.method}, {args.queries} queries, retrieval {args.retrieval}; {exposure}"
     )
     # gain: the sensor's; exposure: the share of the metered exposure it reached (1: none short)
-    print("k | gain | exposure | T1 / T2 / T3 (%) | paper AP-GeM / NetVLAD + SIFT T1")
+    # answered: a pose returned; wrong: answered beyond (5 m, 10 deg); R@5: one of the retrieval's
+    # best 5 map images within 10 m of the query (pose-prior retrieval: by construction)
+    print(
+        "k | gain | exposure | T1 / T2 / T3 (%) | answered / wrong (%) | R@5 10 m (%)"
+        " | paper AP-GeM / NetVLAD + SIFT T1"
+    )
     sim = Simulator(town)
     try:
         for k in (float(v) for v in args.k.split(",")):
             sim.set_conditions(Conditions(illumination=Illumination(k=k), exposure=exposure))
-            pos, rot = [], []
+            pos, rot, ranked = [], [], []
             for (x, y), h in zip(xy, yaws):
                 sim.teleport(float(x), float(y), float(h))
                 truth = planar_pose(float(x), float(y), float(h))
@@ -103,12 +108,18 @@ def main() -> None:
                     p = r = float("nan")
                 pos.append(p)
                 rot.append(r)
+                xyz = np.asarray(e.info.get("ranked_xyz_m", np.zeros((0, 3))), np.float64)
+                ranked.append(np.linalg.norm(xyz - truth[:3, 3], axis=1))
             rec = recall(np.array(pos), np.array(rot))
+            answered = float(np.mean(np.isfinite(pos)))
+            wrong = confident_wrong(np.array(pos), np.array(rot))
+            r5 = place_recall(ranked, ranks=(5,), radii_m=(10.0,))[0]
             ref = " / ".join(f"{t1_paper[m].get(int(k), float('nan')):.1f}"
                              for m in ("AP-GeM + SIFT", "NetVLAD + SIFT"))  # fmt: skip
             gain, share = sim.renderer.gain, sim.renderer.exposure_share
             print(f"{k:g} | {gain:.0f} | {share:.3g} | "
                   + " / ".join(f"{100 * v:.1f}" for v in rec[:3])
+                  + f" | {100 * answered:.1f} / {100 * wrong:.1f} | {100 * r5:.1f}"
                   + f" | {ref}", flush=True)  # fmt: skip
     finally:
         sim.close()

@@ -19,6 +19,8 @@ def test_visual_localizer_in_a_ground_truth_episode(small_town, stretch, sift_ma
     assert np.median(pos) < 0.1
     assert np.mean(pos < 0.5) > 0.8
     assert all(x.compute_time_s > 0 for x in recs)
+    # each answer keeps its PnP inlier count (what localizer.min_inliers would compare), a failure 0
+    assert all(x.inliers >= 4 if x.success else x.inliers == 0 for x in recs)
     # the vehicle pose comes through the camera's mounting: the yaw is the car's, not the camera's
     assert np.median([x.yaw_error_deg for x in recs if x.success]) < 1.0
 

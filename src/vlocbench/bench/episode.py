@@ -186,6 +186,7 @@ def _record(p: _InFlight, fused: bool | None) -> LocalizationRecord:
         retrieval_distances_m=tuple(float(d) for d in distances),
         retrieved_images=tuple(str(n) for n in e.info.get("retrieved", ())),
         covariance=() if e.covariance is None else tuple(np.asarray(e.covariance, float).ravel()),
+        inliers=int(e.info.get("inliers", 0)) if e.success else 0,
     )
 
 

@@ -57,6 +57,9 @@ class LocalizationRecord:
     # the answer's own (3, 3) covariance of x, y, yaw (m^2, m rad, rad^2), row by row; empty when
     # the localizer gave none and the EKF used its default (EkfConfig.pose_covariance)
     covariance: tuple[float, ...] = ()
+    # PnP inliers of the answer (0 on failure, or when the localizer reports none): what a
+    # ``localizer.min_inliers`` would have been compared with
+    inliers: int = 0
 
 
 @dataclass(frozen=True, kw_only=True)
