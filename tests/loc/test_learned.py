@@ -157,6 +157,28 @@ def test_learned_features_do_not_depend_on_the_callers_threads(offline, gallery)
         assert np.array_equal(one, two)
 
 
+def test_image_normalized_retrieval_describes_a_darker_image_as_the_same_place(offline, gallery):
+    """input_norm "image" divides out a uniform darkening (the night of a camera past its
+    exposure range); ImageNet's fixed statistics do not. An unknown value lists the valid ones."""
+    from vlocbench.errors import UnknownNameError
+    from vlocbench.loc.learned import EfficientNetGem
+    from vlocbench.loc.registry import build_retrieval
+
+    day = gallery.load_image(gallery.names[10])
+    night = np.round(day.astype(np.float64) / 16.0).astype(np.uint8)  # 4 stops darker, quantized
+    elsewhere = gallery.load_image(gallery.names[25])  # 30 m further along the route
+    similarity = {}
+    for name in ("effnet-gem", "effnet-gem-norm"):
+        retrieval = build_retrieval(name)
+        d_day, d_night, d_else = (retrieval.describe(im, None) for im in (day, night, elsewhere))
+        similarity[name] = (float(d_day @ d_night), float(d_day @ d_else))
+    same, other = similarity["effnet-gem-norm"]
+    assert same > other  # the dark image is nearer its place than the day image of another
+    assert same > similarity["effnet-gem"][0]
+    with pytest.raises(UnknownNameError, match="valid: image, imagenet"):
+        EfficientNetGem(input_norm="contrast")
+
+
 def test_the_device_is_auto_cpu_or_cuda(monkeypatch):
     from vlocbench.errors import ConfigError, UnknownNameError
     from vlocbench.loc.learned import EfficientNetGem, resolve_device

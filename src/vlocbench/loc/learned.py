@@ -273,18 +273,28 @@ class LightGlueMatcher:
         return not pruning or keypoints <= self.net.pruning_min_kpts(torch.device(self.device))
 
 
+INPUT_NORMS = ("imagenet", "image")  # EfficientNetGem.input_norm
+
+
 class EfficientNetGem:
     """EfficientNet-Lite0 (ImageNet) last feature map, GeM-pooled (p = 3), L2-normalized: 1280-D.
 
     Pretrained for classification, not for places; a generic, offline stand-in for NetVLAD.
+    ``input_norm``: "imagenet" feeds the image with ImageNet's channel statistics, as the network
+    was trained; "image" standardizes each channel by the image's own mean and deviation (an
+    instance normalization, as XFeat's first layer), so that a uniformly darker image of a place
+    is described as that place by day (vlocbench's option: NetVLAD and AP-GeM learned some of that
+    robustness from night images, which this network never saw).
     """
 
-    def __init__(self, p: float = 3.0, width: int = 320, device: str = "auto",
-                 name: str = "effnet-gem") -> None:  # fmt: skip
+    def __init__(self, p: float = 3.0, width: int = 320, input_norm: str = "imagenet",
+                 device: str = "auto", name: str = "effnet-gem") -> None:  # fmt: skip
+        if input_norm not in INPUT_NORMS:
+            raise UnknownNameError("retrieval.input_norm", input_norm, INPUT_NORMS)
         torch = _torch()
         from efficientnet_lite_pytorch import EfficientNet
 
-        self.name, self.p, self.width = name, p, width
+        self.name, self.p, self.width, self.input_norm = name, p, width, input_norm
         self.device = resolve_device(device)
         net = EfficientNet.from_name("efficientnet-lite0")
         net.load_state_dict(
@@ -316,8 +326,14 @@ class EfficientNetGem:
             (self.width, round(h * self.width / w)),
             interpolation=cv2.INTER_AREA,
         )
-        x = (_tensor(small, self.device) - self.mean) / self.std
-        with _inference():
+        x = _tensor(small, self.device)
+        with _inference():  # the image's statistics too: a reduction, so on TORCH_THREADS
+            if self.input_norm == "image":
+                mean = x.mean(dim=(2, 3), keepdim=True)
+                std = x.std(dim=(2, 3), keepdim=True).clamp(min=1.0 / 255.0)  # flat stays flat
+                x = (x - mean) / std
+            else:
+                x = (x - self.mean) / self.std
             fmap = self.net.extract_features(x)
             v = _numpy(fmap.clamp(min=1e-6).pow(self.p).mean(dim=(2, 3)).pow(1.0 / self.p)[0])
         return (v / max(float(np.linalg.norm(v)), 1e-12)).astype(np.float32)

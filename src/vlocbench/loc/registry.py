@@ -50,6 +50,8 @@ REVISIONS: dict[str, int] = {
 RETRIEVAL: dict[str, tuple[str, dict[str, Any]]] = {
     "vlad": ("vlocbench.loc.retrieval:Vlad", {"clusters": 64}),
     "effnet-gem": ("vlocbench.loc.learned:EfficientNetGem", {}),
+    # each image standardized by its own statistics: places found by night too (vlocbench's)
+    "effnet-gem-norm": ("vlocbench.loc.learned:EfficientNetGem", {"input_norm": "image"}),
 }
 
 
