@@ -108,11 +108,11 @@ def main() -> None:
                     p = r = float("nan")
                 pos.append(p)
                 rot.append(r)
-                xyz = np.asarray(e.info.get("ranked_xyz_m", np.zeros((0, 3))), np.float64)
-                ranked.append(np.linalg.norm(xyz - truth[:3, 3], axis=1))
-            rec = recall(np.array(pos), np.array(rot))
-            answered = float(np.mean(np.isfinite(pos)))
-            wrong = confident_wrong(np.array(pos), np.array(rot))
+                ranked.append(e.retrieval_distances_m(truth))
+            errors = np.array(pos), np.array(rot)
+            rec = recall(*errors)
+            answered = float(np.mean(np.isfinite(errors[0])))
+            wrong = confident_wrong(*errors)
             r5 = place_recall(ranked, ranks=(5,), radii_m=(10.0,))[0]
             ref = " / ".join(f"{t1_paper[m].get(int(k), float('nan')):.1f}"
                              for m in ("AP-GeM + SIFT", "NetVLAD + SIFT"))  # fmt: skip

@@ -158,8 +158,6 @@ def _record(p: _InFlight, fused: bool | None) -> LocalizationRecord:
         x = y = z = yaw = roll = pitch = float("nan")
         pos_err = yaw_err = pos_err_3d = rot_err = float("nan")
     ex, ey, eyaw = p.ekf
-    ranked_xyz = np.asarray(e.info.get("ranked_xyz_m", np.zeros((0, 3))), np.float64)
-    distances = np.linalg.norm(ranked_xyz - p.truth[:3, 3], axis=1) if len(ranked_xyz) else ()
     return LocalizationRecord(
         time_s=p.time_s,
         success=e.success,
@@ -183,7 +181,7 @@ def _record(p: _InFlight, fused: bool | None) -> LocalizationRecord:
         latency_s=p.latency_s,
         fused=fused,
         reason=e.reason,
-        retrieval_distances_m=tuple(float(d) for d in distances),
+        retrieval_distances_m=tuple(float(d) for d in e.retrieval_distances_m(p.truth)),
         retrieved_images=tuple(str(n) for n in e.info.get("retrieved", ())),
         covariance=() if e.covariance is None else tuple(np.asarray(e.covariance, float).ravel()),
         inliers=int(e.info.get("inliers", 0)) if e.success else 0,

@@ -52,6 +52,13 @@ class PoseEstimate:
                 info: dict[str, Any] | None = None) -> PoseEstimate:  # fmt: skip
         return cls(False, compute_time_s=compute_time_s, reason=reason, info=info or {})
 
+    def retrieval_distances_m(self, world_from_vehicle: Array) -> Array:
+        """(R,) distances from the true vehicle pose (4, 4) to where the vehicle would stand for
+        each of the retrieval's best images (``info["ranked_xyz_m"]``), best first; (0,) for a
+        localizer without retrieval."""
+        ranked_xyz = np.asarray(self.info.get("ranked_xyz_m", np.zeros((0, 3))), np.float64)
+        return np.linalg.norm(ranked_xyz.reshape(-1, 3) - world_from_vehicle[:3, 3], axis=1)
+
 
 @runtime_checkable
 class Localizer(Protocol):
