@@ -89,9 +89,16 @@ def sensor_noise(
     exposure^(1/DISPLAY_GAMMA)), then with the shot and read noise of a sensor at ``gain``: per
     pixel sigma^2 = shot_noise * gain * grey + (read_noise * gain)^2 (grey levels), one draw per
     pixel."""
+    darken = np.float32(exposure ** (1.0 / DISPLAY_GAMMA)) if exposure < 1.0 else None
+    if shot_noise == 0 and read_noise == 0:
+        # noiseless: the same float32 steps as below, on the 256 levels (one table look-up)
+        if darken is None:
+            return np.ascontiguousarray(image)
+        levels = np.arange(256, dtype=np.float32) * darken + np.float32(0.5)
+        return np.clip(levels, 0, 255).astype(np.uint8)[image]
     rgb = image.astype(np.float32)
-    if exposure < 1.0:
-        rgb *= np.float32(exposure ** (1.0 / DISPLAY_GAMMA))
+    if darken is not None:
+        rgb *= darken
     # the channels' mean summed in order: in float32 exactly numpy's mean, without its slow reduce
     grey = rgb[..., 0] + rgb[..., 1]
     grey += rgb[..., 2]
