@@ -42,6 +42,7 @@ def test_a_ros_node_drives_like_the_same_method_in_process(node, small_sim, stre
     a, b = local.localizations, remote.localizations
     assert len(a) == len(b) >= 20
     assert [x.success for x in a] == [x.success for x in b]
+    assert [x.inliers for x in a] == [x.inliers for x in b] and max(x.inliers for x in b) > 0
     err_a = np.array([x.position_error_3d_m for x in a])
     err_b = np.array([x.position_error_3d_m for x in b])
     np.testing.assert_allclose(err_b, err_a, atol=1e-6, equal_nan=True)  # the same poses

@@ -3,7 +3,8 @@ sends each query image to the node and waits for its answer.
 
 The episode waits (it stays synchronous, so a drive is as deterministic as the node); the image is
 stamped with the episode's simulated time and the answer is the pose stamped alike. Our own node
-(``vlocbench ros localize``) reports a failure on ``diagnostics`` with the image's stamp; for a node
+(``vlocbench ros localize``) reports every attempt on ``diagnostics`` with the image's stamp: a
+failure and its reason, and the inliers of a pose (kept with the answer, as in process). For a node
 that stays silent on failure, ``timeout_s`` ends the wait.
 """
 
@@ -26,6 +27,8 @@ from vlocbench.ros.messages import (
     stamp_of,
 )
 from vlocbench.sim import Camera
+
+STATUS_GRACE_S = 1.0  # how long the first pose waits for a status that may never come
 
 
 class RosLocalizer:
@@ -52,6 +55,9 @@ class RosLocalizer:
         self.info_pub = self.node.create_publisher(CameraInfo, endpoint.camera_info_topic, 10)
         self.poses: dict[str, Any] = {}
         self.failures: dict[str, str] = {}
+        self.inliers: dict[str, int] = {}
+        # whether the node reports inliers (None: not known before its first pose)
+        self._reports_inliers: bool | None = None
         self.node.create_subscription(PoseWithCovarianceStamped, endpoint.pose_topic,
                                       self._on_pose, 10)  # fmt: skip
         self.node.create_subscription(DiagnosticArray, "diagnostics", self._on_status, 10)
@@ -68,12 +74,18 @@ class RosLocalizer:
     def _on_status(self, msg: Any) -> None:
         for status in msg.status:
             values = {kv.key: kv.value for kv in status.values}
-            if "stamp" in values and values.get("state") != "localized":
+            if "stamp" not in values:
+                continue
+            if values.get("state") != "localized":
                 self.failures[values["stamp"]] = status.message
+            elif "inliers" in values:
+                self.inliers[values["stamp"]] = int(values["inliers"])
+                self._reports_inliers = True
 
     def reset(self, seed: int) -> None:
         self.poses.clear()
         self.failures.clear()
+        self.inliers.clear()
 
     def _wait_for_node(self) -> None:
         deadline = time.monotonic() + self.endpoint.timeout_s
@@ -106,9 +118,22 @@ class RosLocalizer:
             self.executor.spin_once(timeout_sec=0.01)
         elapsed = time.perf_counter() - start
         if key in self.poses:
+            self._wait_for_inliers(key, deadline)
             msg = self.poses.pop(key)
-            return PoseEstimate(True, pose_from_msg(msg.pose.pose), None, elapsed)
+            info = {"inliers": self.inliers.pop(key)} if key in self.inliers else {}
+            return PoseEstimate(True, pose_from_msg(msg.pose.pose), None, elapsed, info=info)
         return PoseEstimate.failure(self.failures.pop(key), elapsed)
+
+    def _wait_for_inliers(self, key: str, deadline: float) -> None:
+        """Our node publishes a pose, then its status with the inliers: wait for that status
+        (only STATUS_GRACE_S after the first pose, from a node that may send none)."""
+        if self._reports_inliers is False:
+            return
+        if self._reports_inliers is None:
+            deadline = min(deadline, time.monotonic() + STATUS_GRACE_S)
+        while key not in self.inliers and time.monotonic() < deadline:
+            self.executor.spin_once(timeout_sec=0.01)
+        self._reports_inliers = key in self.inliers or bool(self._reports_inliers)
 
     def close(self) -> None:
         self.executor.shutdown()
