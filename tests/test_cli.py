@@ -20,6 +20,20 @@ def test_bad_fov_names_the_field(capsys, tmp_path):
     assert "fov_deg" in capsys.readouterr().err
 
 
+def test_render_with_and_without_antialiasing(tmp_path):
+    import cv2
+    import numpy as np
+
+    size = ["--width", "160", "--height", "120", "--waypoint", "40"]
+    assert main(["render", "town10", *size, "-o", str(tmp_path / "smooth.png")]) == 0
+    assert (
+        main(["render", "town10", *size, "--no-antialias", "-o", str(tmp_path / "hard.png")]) == 0
+    )
+    smooth, hard = (cv2.imread(str(tmp_path / f)).astype(int) for f in ("smooth.png", "hard.png"))
+    changed = np.abs(smooth - hard).max(axis=2) > 10
+    assert smooth.shape == (120, 160, 3) and 0 < changed.mean() < 0.1
+
+
 def test_drive_prints_failure_rates(capsys, tmp_path):
     config = tmp_path / "episode.yaml"
     config.write_text("mode: ground_truth\nlocalization_rate_hz: 1.0\n")

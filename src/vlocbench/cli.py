@@ -69,7 +69,10 @@ def _render(args: argparse.Namespace) -> int:
         headlights=Headlights(on=args.headlights),
     )
     camera = Camera(
-        "cli", Intrinsics(args.width, args.height, args.fov), Extrinsics(yaw_deg=args.yaw)
+        "cli",
+        Intrinsics(args.width, args.height, args.fov),
+        Extrinsics(yaw_deg=args.yaw),
+        antialias=args.antialias,
     )
     n = len(town.route.waypoints_xy)
     if not 0 <= args.waypoint < n:
@@ -267,7 +270,9 @@ def _gallery(args: argparse.Namespace) -> int:
     from vlocbench.sim.town import generate_town, load_town_spec
 
     town = generate_town(load_town_spec(args.town))
-    camera = Camera("gallery", Intrinsics(args.width, args.height, args.fov), Extrinsics())
+    camera = Camera(
+        "gallery", Intrinsics(args.width, args.height, args.fov), Extrinsics(), args.antialias
+    )
     out = args.out or Path("galleries") / f"{town.name}-k{args.k:g}"
     with Simulator(town, Conditions(illumination=Illumination(k=args.k))) as sim:
         gallery = capture_gallery(
@@ -387,6 +392,10 @@ def _parents() -> dict[str, argparse.ArgumentParser]:
     camera.add_argument(
         "--fov", type=float, default=90.0, help="horizontal field of view in degrees"
     )
+    camera.add_argument(
+        "--no-antialias", dest="antialias", action="store_false",
+        help="sample each pixel once, not 4 times (about half the render time)",
+    )  # fmt: skip
     k = argparse.ArgumentParser(add_help=False)
     k.add_argument("--k", type=float, default=0.0, help="illumination level k, 0 (noon) to 10")
     report = argparse.ArgumentParser(add_help=False)

@@ -153,7 +153,7 @@ def test_shipped_experiments_load():
     files = sorted(root.glob("*.yaml"))
     names = {f.stem for f in files}
     assert {"smoke", "demo", "season", "intrinsics", "extrinsics", "multi_camera", "traffic",
-            "headlights", "night_retrieval"} <= names  # fmt: skip
+            "headlights", "night_retrieval", "aliased"} <= names  # fmt: skip
     for f in files:
         spec = load_experiment(f)
         assert spec.name == f.stem and spec.setups

@@ -193,3 +193,19 @@ def test_beyond_its_range_the_camera_records_the_share_of_exposure_it_reached(sm
     expected = (share ** (1 / 2.2)) * full.image.astype(float).mean()
     assert dark.image.astype(float).mean() == pytest.approx(expected, rel=0.03)
     assert dark.image.mean() > 3 * share * full.image.mean()  # far brighter than linear
+
+
+def test_an_aliased_camera_sees_the_same_scene_with_harder_edges(small_sim):
+    """``antialias=False`` samples each pixel once: the same picture, only edge pixels differ
+    (each keeps its own GL context, so the two kinds of image interleave)."""
+    smooth_cam = Camera("g", SMALL, Extrinsics())
+    hard_cam = Camera("g", SMALL, Extrinsics(), antialias=False)
+    smooth = render(small_sim, Conditions(), smooth_cam).image.astype(np.int16)
+    hard = render(small_sim, Conditions(), hard_cam).image.astype(np.int16)
+    again = render(small_sim, Conditions(), smooth_cam).image.astype(np.int16)
+    np.testing.assert_array_equal(again, smooth)
+    changed = np.abs(hard - smooth).max(axis=2) > 10
+    assert 0 < changed.mean() < 0.05
+    # what changed lies on edges: next to a strong gradient of the smooth image
+    edges = cv2.dilate(cv2.Canny(smooth.astype(np.uint8), 50, 150), np.ones((3, 3), np.uint8))
+    assert (edges[changed] > 0).mean() > 0.9

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from vlocbench.config import require
+from vlocbench.config import ADDED_OPTION, require
 from vlocbench.geometry import BODY_FROM_OPTICAL, make_pose, rpy_to_matrix
 from vlocbench.interfaces import Array
 
@@ -66,9 +66,15 @@ class Extrinsics:
 
 @dataclass(frozen=True)
 class Camera:
+    """A camera of the rig. ``antialias``: each pixel averages 4 samples of the scene (4x
+    multisampling), as a sensor integrates light over its pixel; every stored result was rendered
+    so. ``False`` samples each pixel once, with stair-stepped edges: on Mesa's llvmpipe an
+    800x600 image renders in less than half the time."""
+
     name: str = "gallery"
     intrinsics: Intrinsics = field(default_factory=Intrinsics)
     extrinsics: Extrinsics = field(default_factory=Extrinsics)
+    antialias: bool = field(default=True, metadata=ADDED_OPTION)
 
     def world_from_cam(self, world_from_vehicle: Array) -> Array:
         return world_from_vehicle @ self.extrinsics.vehicle_from_cam()

@@ -32,6 +32,7 @@ from vlocbench.sim.scene import (
 NEAR_M, FAR_M = 0.1, 2000.0
 # what the camera's light meter reads of the car's own headlights, per unit of their intensity
 HEADLIGHT_METERING = 0.2
+ANTIALIAS_SAMPLES = 4  # MuJoCo's default multisampling of offscreen images
 LEAVES = {"summer": (0.33, 0.55, 0.22), "autumn": (0.85, 0.45, 0.12), "winter": (0.5, 0.5, 0.5)}
 
 
@@ -71,7 +72,7 @@ class Renderer:
         self.scene = scene
         self.shadows = shadows
         self.backend = select_backend()
-        self._renderers: dict[tuple[int, int], mujoco.Renderer] = {}
+        self._renderers: dict[tuple[int, int, int], mujoco.Renderer] = {}
         self.option = mujoco.MjvOption()
         self.conditions = conditions or Conditions()
         self.apply(self.conditions)
@@ -150,9 +151,11 @@ class Renderer:
         mujoco.mjr_uploadTexture(self.scene.model, r._mjr_context, self.scene.sky_texture_id)
 
     # -- rendering ------------------------------------------------------------------------------
-    def _renderer(self, width: int, height: int) -> mujoco.Renderer:
-        key = (width, height)
+    def _renderer(self, width: int, height: int, samples: int) -> mujoco.Renderer:
+        key = (width, height, samples)
         if key not in self._renderers:
+            # the multisample count is read when a context is made: one context per count
+            self.scene.model.vis.quality.offsamples = samples
             try:
                 r = mujoco.Renderer(self.scene.model, height, width, max_geom=20000)
             except Exception as exc:  # MuJoCo raises plain errors for missing GL libraries
@@ -192,14 +195,15 @@ class Renderer:
         frame_id: int = 0,
         markers_world: NDArray[np.float64] | None = None,
         marker_radius_m: float = 0.1,
+        antialias: bool = True,
     ) -> Image:
         """RGB image (height, width, 3) from the optical-frame pose ``world_from_cam``.
 
         ``frame_id`` seeds per-frame effects (rain). ``markers_world`` (N, 3) draws unlit red
-        spheres, e.g. to check projections.
+        spheres, e.g. to check projections. ``antialias``: 4 samples per pixel, else 1.
         """
         sc = self.scene
-        r = self._renderer(width, height)
+        r = self._renderer(width, height, ANTIALIAS_SAMPLES if antialias else 0)
         r.update_scene(sc.data, camera=-1, scene_option=self.option)
         half_w = NEAR_M * np.tan(np.radians(fov_deg) / 2)
         half_h = half_w * height / width

@@ -150,7 +150,9 @@ class Simulator:
             cam = cam.offset(vp.dz_m, vp.pitch_down_deg) if (vp.dz_m or vp.pitch_down_deg) else cam
             pose = cam.world_from_cam(world_from_vehicle)
             i = cam.intrinsics
-            image = self.renderer.render(pose, i.width, i.height, i.fov_deg, frame_id * 16 + k)
+            image = self.renderer.render(
+                pose, i.width, i.height, i.fov_deg, frame_id * 16 + k, antialias=cam.antialias
+            )
             frames.append(Frame(cam, image, pose, self.state.time_s))
         return frames
 
