@@ -8,7 +8,7 @@
 Renders the gallery camera at ``--queries`` poses spread along the route (half-way between gallery
 images), at each illumination level k, localizes each with the method's map (built once under
 out/cache, as an experiment would) and prints T1 / T2 / T3 recall beside the paper's Table 5
-(SIFT with AP-GeM / NetVLAD). The camera's exposure range and noise (``Exposure``) are the knobs:
+(SIFT with AP-GeM / NetVLAD), with the median time per query and per stage. The camera's exposure range and noise (``Exposure``) are the knobs:
 one setting for every k and both towns, chosen so that recall falls with k as the paper's does.
 
 ``--retrieval pose-prior`` retrieves the map images nearest to the true pose instead of asking the
@@ -35,6 +35,8 @@ from vlocbench.bench.visual import VisualLocalizer
 from vlocbench.geometry import planar_pose, pose_error
 from vlocbench.loc.localizer import RETRIEVAL_SOURCES
 from vlocbench.sim import Conditions, Exposure, Illumination, Simulator
+
+STAGES = ("features", "retrieval", "matching", "pnp")
 
 
 def main() -> None:
@@ -87,16 +89,18 @@ def main() -> None:
     )
     # gain: the sensor's; exposure: the share of the metered exposure it reached (1: none short)
     # answered: a pose returned; wrong: answered beyond (5 m, 10 deg); R@5: one of the retrieval's
-    # best 5 map images within 10 m of the query (pose-prior retrieval: by construction)
+    # best 5 map images within 10 m of the query (pose-prior retrieval: by construction); ms per
+    # query: medians of the localizer's own time and of its stages' (time it on an idle machine)
     print(
         "k | gain | exposure | T1 / T2 / T3 (%) | answered / wrong (%) | R@5 10 m (%)"
+        " | ms per query (" + " / ".join(STAGES) + ")"
         " | paper AP-GeM / NetVLAD + SIFT T1"
     )
     sim = Simulator(town)
     try:
         for k in (float(v) for v in args.k.split(",")):
             sim.set_conditions(Conditions(illumination=Illumination(k=k), exposure=exposure))
-            pos, rot, ranked = [], [], []
+            pos, rot, ranked, seconds = [], [], [], []
             for (x, y), h in zip(xy, yaws):
                 sim.teleport(float(x), float(y), float(h))
                 truth = planar_pose(float(x), float(y), float(h))
@@ -109,6 +113,8 @@ def main() -> None:
                 pos.append(p)
                 rot.append(r)
                 ranked.append(e.retrieval_distances_m(truth))
+                stages = e.info.get("seconds", {})
+                seconds.append([e.compute_time_s, *(stages.get(s, 0.0) for s in STAGES)])
             errors = np.array(pos), np.array(rot)
             rec = recall(*errors)
             answered = float(np.mean(np.isfinite(errors[0])))
@@ -120,6 +126,8 @@ def main() -> None:
             print(f"{k:g} | {gain:.0f} | {share:.3g} | "
                   + " / ".join(f"{100 * v:.1f}" for v in rec[:3])
                   + f" | {100 * answered:.1f} / {100 * wrong:.1f} | {100 * r5:.1f}"
+                  + " | {:.0f} ({:.0f} / {:.0f} / {:.0f} / {:.0f})".format(
+                      *1000 * np.median(seconds, axis=0))
                   + f" | {ref}", flush=True)  # fmt: skip
     finally:
         sim.close()

@@ -62,19 +62,19 @@ class VisualLocalizer:
         # where the vehicle would stand to take each of the first camera's retrieved images
         first = query.frames[0].camera.extrinsics.vehicle_from_cam()
         ranked = result.cameras[0].ranked_world_from_cam @ invert_pose(first)
-        retrieval = {
+        attempt = {  # what a failure reports too
             "ranked_xyz_m": ranked[:, :3, 3],
             "retrieved": [name for r in result.cameras for name in r.retrieved],
+            "seconds": result.seconds,
         }
         if not result.success:
-            return PoseEstimate.failure(result.reason, elapsed, retrieval)
+            return PoseEstimate.failure(result.reason, elapsed, attempt)
         assert result.world_from_rig is not None
         info = {
-            **retrieval,
+            **attempt,
             "camera": "rig" if result.generalized else query.frames[result.camera].camera.name,
             "inliers": result.num_inliers,
             "correspondences": sum(r.num_correspondences for r in result.cameras),
-            "seconds": result.seconds,
             "fallback": not result.generalized and result.cameras[result.camera].fallback,
         }
         return PoseEstimate(True, result.world_from_rig, None, elapsed, result.reason, info)
