@@ -57,3 +57,16 @@ def test_sequential_localization_from_the_ekf_prior_navigates(
     # the paper's filter applies each pose 0.2 s late at the current state: it lags that far
     lag_m = 0.2 * r.trajectory.speed_mps.max()
     assert np.percentile(r.trajectory.ekf_position_error_m, 95) < lag_m + 0.5
+
+
+def test_a_failed_attempt_reports_its_stages(sift_map):
+    """A black image finds nothing, and says how long each stage it ran took."""
+    from vlocbench.bench import LocalizationQuery
+    from vlocbench.sim import Frame
+
+    localizer = VisualLocalizer(sift_map[0], (CAMERA,), name="sift")
+    i = CAMERA.intrinsics
+    black = Frame(CAMERA, np.zeros((i.height, i.width, 3), np.uint8), np.eye(4), 0.0)
+    e = localizer.localize(LocalizationQuery(0.0, (black,), np.eye(4)))
+    assert not e.success and e.reason
+    assert e.info["seconds"]["features"] > 0
