@@ -2,7 +2,7 @@
 overhead (store, scheduling, transfers, idle workers at the end) as a share of episode time.
 
     python benchmarks/bench_runner.py [--workers 1,2] [--repeats 3] [--out out/bench_runner]
-                                      [--one-thread]
+                                      [--one-thread] [--no-antialias]
 
 One worker runs in the driver process, whose OpenCV, torch and renderer use every core; a pool
 worker uses one thread of each. ``--one-thread`` limits this process as a pool worker is limited,
@@ -44,12 +44,16 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--out", type=Path, default=Path("out/bench_runner"))
     ap.add_argument("--one-thread", action="store_true", help="this process as a pool worker")
+    ap.add_argument(
+        "--no-antialias", action="store_true", help="render with Camera(antialias=False)"
+    )
     args = ap.parse_args()
+    experiment = {**EXPERIMENT, "gallery": {"camera": {"antialias": not args.no_antialias}}}
     if args.one_thread:  # before torch and the renderer start, which read these then
         os.environ.update(WORKER_THREADS_ENV)
         cv2.setNumThreads(1)
     plan = load_experiment(
-        {**EXPERIMENT, "output": str(args.out / "warmup"), "cache": str(args.out / "cache")}
+        {**experiment, "output": str(args.out / "warmup"), "cache": str(args.out / "cache")}
     )
     shutil.rmtree(plan.output_dir, ignore_errors=True)
     run_experiment(plan, progress=False)  # gallery, map, imports, caches
@@ -61,7 +65,7 @@ def main() -> None:
             shutil.rmtree(out, ignore_errors=True)
             s = run_experiment(
                 load_experiment(
-                    {**EXPERIMENT, "output": str(out), "cache": str(args.out / "cache")}
+                    {**experiment, "output": str(out), "cache": str(args.out / "cache")}
                 ),
                 workers=workers,
                 progress=False,
