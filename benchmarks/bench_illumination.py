@@ -8,8 +8,9 @@
 Renders the gallery camera at ``--queries`` poses spread along the route (half-way between gallery
 images), at each illumination level k, localizes each with the method's map (built once under
 out/cache, as an experiment would) and prints T1 / T2 / T3 recall beside the paper's Table 5
-(SIFT with AP-GeM / NetVLAD), with the median time per query and per stage. The camera's exposure range and noise (``Exposure``) are the knobs:
-one setting for every k and both towns, chosen so that recall falls with k as the paper's does.
+(SIFT with AP-GeM / NetVLAD), with the median time per query and per stage. The camera's exposure
+range and noise (``Exposure``) are the knobs: one setting for every k and both towns, chosen so
+that recall falls with k as the paper's does.
 
 ``--retrieval pose-prior`` retrieves the map images nearest to the true pose instead of asking the
 map's retrieval: the local features alone, to tell their misses from the retrieval's.

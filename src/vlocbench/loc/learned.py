@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from vlocbench.config import require
+from vlocbench.config import require, require_one_of
 from vlocbench.errors import ConfigError, UnknownNameError
 from vlocbench.loc.features import Features, check_image
 
@@ -199,8 +199,7 @@ class LightGlueMatcher:
         self.device = resolve_device(device)
         require(batch_size >= 1, "matcher.batch_size", "must be >= 1")
         self.batch_size = batch_size  # pairs per forward pass in match_many
-        if features not in _MATCHER_WEIGHTS:
-            raise UnknownNameError("matcher.features", features, _MATCHER_WEIGHTS)
+        require_one_of(features, _MATCHER_WEIGHTS, "matcher.features")
         self.name = name
         conf = {
             **(_LIGHTERGLUE if features == "xfeat" else KF.LightGlue.features[features]),
@@ -289,8 +288,7 @@ class EfficientNetGem:
 
     def __init__(self, p: float = 3.0, width: int = 320, input_norm: str = "imagenet",
                  device: str = "auto", name: str = "effnet-gem") -> None:  # fmt: skip
-        if input_norm not in INPUT_NORMS:
-            raise UnknownNameError("retrieval.input_norm", input_norm, INPUT_NORMS)
+        require_one_of(input_norm, INPUT_NORMS, "retrieval.input_norm")
         torch = _torch()
         from efficientnet_lite_pytorch import EfficientNet
 

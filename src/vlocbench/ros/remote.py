@@ -133,7 +133,8 @@ class RosLocalizer:
             deadline = min(deadline, time.monotonic() + STATUS_GRACE_S)
         while key not in self.inliers and time.monotonic() < deadline:
             self.executor.spin_once(timeout_sec=0.01)
-        self._reports_inliers = key in self.inliers or bool(self._reports_inliers)
+        if self._reports_inliers is None:  # no status with inliers came (_on_status sets True)
+            self._reports_inliers = False
 
     def close(self) -> None:
         self.executor.shutdown()
