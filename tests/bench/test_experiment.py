@@ -140,6 +140,8 @@ def test_bad_experiments_are_clear_errors(tmp_path):
         _spec(sed=1)
     with pytest.raises(ConfigError, match="give all of features, matcher and retrieval"):
         _spec(methods=[{"name": "mine", "features": "sift"}])
+    with pytest.raises(ConfigError, match=r"gallery\.camera\.antialias: expected true or false"):
+        _spec(gallery={"camera": {"antialias": "maybe"}})
     bad = tmp_path / "bad.yaml"
     bad.write_text("towns: [town10\n")
     with pytest.raises(ConfigError, match="invalid YAML"):
