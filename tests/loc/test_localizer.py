@@ -54,6 +54,26 @@ def test_query_between_gallery_images_is_localized(sim, stretch, sift_map):
         assert min(near) < 3.0 and sum(d < 6.0 for d in near) >= 3
 
 
+def test_a_point_seen_by_several_retrieved_images_is_one_correspondence(sim, stretch, sift_map):
+    localizer = MapLocalizer(sift_map[0])
+    frame = _render(sim, query_pose(stretch, 8))
+    result, corr = localizer._solve(frame.image, camera_model(CAMERA), None)
+    assert result.success and corr is not None, result.reason
+    feats = localizer.extractor.extract(frame.image)
+    by_name = {m.name: m for m in localizer.images}
+    matched = []  # every (query keypoint, 3D point) the cluster's images give, repeats included
+    for name in result.cluster:
+        m = localizer.matcher.match(feats, by_name[name].features)
+        matched += [(int(q), int(p)) for q, p in zip(m[:, 0], by_name[name].point_ids[m[:, 1]])]
+    assert len(result.cluster) >= 3 and len(set(matched)) < 0.8 * len(matched)
+    # hloc's rule: each pair once, in the order first matched
+    assert len(corr.points2D) == result.num_correspondences == len(set(matched))
+    first = list(dict.fromkeys(matched))
+    assert np.allclose(corr.points2D, feats.keypoints[[q for q, _ in first]] + 0.5)
+    assert np.allclose(corr.points3D, [localizer.points3D[p] for _, p in first])
+    assert result.num_inliers <= len(set(matched))
+
+
 def test_confident_pose_stops_matching_early(sim, stretch, sift_map):
     frame = _render(sim, query_pose(stretch, 8))
     every = MapLocalizer(sift_map[0]).localize(frame.image, camera_model(CAMERA))

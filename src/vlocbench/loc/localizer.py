@@ -94,6 +94,12 @@ class LocalizerConfig:
         return max(self.min_inliers, MIN_PNP_POINTS)
 
 
+def _unique_rows(rows: NDArray[np.int64]) -> NDArray[np.int64]:
+    """``rows`` (M, 2) without repeats, each kept where it first appears."""
+    _, first = np.unique(rows, axis=0, return_index=True)
+    return rows[np.sort(first)]
+
+
 def world_covariance(cam_from_world: NDArray[np.float64],
                      cam_from_world_covariance: NDArray[np.float64]) -> NDArray[np.float64]:  # fmt: skip
     """pycolmap's (6, 6) PnP covariance of ``cam_from_world`` (4, 4) as the covariance of
@@ -313,8 +319,12 @@ class MapLocalizer:
     def _best_pose(self, feats: Features, cam: pycolmap.Camera, retrieved: NDArray[np.int64],
                    seconds: dict[str, float]) -> _Pose:  # fmt: skip
         """Match the retrieved images cluster by cluster and solve PnP on each cluster's
-        correspondences; the pose with the most inliers wins. With ``confident_inliers``, PnP runs
-        as each image's matches accumulate and the search stops at a pose that confident."""
+        correspondences; the pose with the most inliers wins. A query keypoint matched to the same
+        3D point through several images of a cluster is one correspondence, as in hloc's
+        ``pose_from_cluster`` and the paper's localizer: a point seen by many retrieved images
+        neither counts as several inliers nor weighs more in RANSAC. With ``confident_inliers``,
+        PnP runs as each image's matches accumulate and the search stops at a pose that
+        confident."""
         c = self.config
         options = pycolmap.AbsolutePoseEstimationOptions()
         options.ransac.max_error = c.ransac_max_error_px
@@ -323,20 +333,19 @@ class MapLocalizer:
         progressive = c.confident_inliers > 0
         best = _Pose(0, None, [], None)
         for cluster in self._clusters(retrieved):
-            q_idx: list[NDArray[np.int64]] = []
-            xyz: list[NDArray[np.float64]] = []
+            pairs = np.zeros((0, 2), np.int64)  # (query keypoint, 3D point id), each once
             for n, i in enumerate(cluster):
                 t = time.perf_counter()
                 m = self.matcher.match(feats, self.images[i].features)
                 seconds["matching"] += time.perf_counter() - t
-                q_idx.append(m[:, 0])
-                xyz.extend(self.points3D[p] for p in self.images[i].point_ids[m[:, 1]])
-                q = np.concatenate(q_idx)
-                if (not progressive and n < len(cluster) - 1) or len(q) < c.min_points:
+                found = np.stack([m[:, 0], self.images[i].point_ids[m[:, 1]]], 1)
+                pairs = _unique_rows(np.concatenate([pairs, found.astype(np.int64)]))
+                if (not progressive and n < len(cluster) - 1) or len(pairs) < c.min_points:
                     continue
                 t = time.perf_counter()
                 corr = _Correspondences(
-                    feats.keypoints[q].astype(np.float64) + 0.5, np.asarray(xyz, np.float64)
+                    feats.keypoints[pairs[:, 0]].astype(np.float64) + 0.5,
+                    np.array([self.points3D[p] for p in pairs[:, 1]], np.float64),
                 )
                 answer = pycolmap.estimate_and_refine_absolute_pose(
                     corr.points2D, corr.points3D, cam, options, return_covariance=True
