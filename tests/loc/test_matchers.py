@@ -12,7 +12,7 @@ from vlocbench.loc.registry import build_features
 @pytest.fixture(scope="module")
 def sift_features(gallery):
     extractor = build_features("opencv-sift")  # the most keypoints of our extractors
-    return [extractor.extract(gallery.load_image(gallery.names[k])) for k in (20, 21, 22)]
+    return [extractor.extract(gallery.load_image(gallery.names[k])) for k in (10, 11, 12)]
 
 
 def _reference(a: Features, b: Features, ratio: float) -> set[tuple[int, int]]:

@@ -21,12 +21,17 @@ SEASONS: tuple[str, ...] = ("summer", "autumn", "winter")
 
 @dataclass(frozen=True)
 class Illumination:
-    """Paper's scheme: V_k = V_base * 0.5**k for sun intensity and sun elevation; k = 0 is noon."""
+    """Paper's scheme: V_k = V_base * 0.5**k for sun intensity and sun elevation; k = 0 is noon.
+
+    The bases are the paper's code's (``EnvironmentCatalog.xosc``, ``experiment_descriptions.yml``):
+    elevation 1.31 rad (75 deg; its text says 0.4 pi) and azimuth 0, here the sun in the +x
+    direction of the town, along one of its two street directions as in CARLA's grid towns.
+    """
 
     k: float = 0.0
     sun_intensity_base: float = 1.0
-    sun_elevation_base_rad: float = 0.4 * np.pi
-    sun_azimuth_deg: float = 135.0
+    sun_elevation_base_rad: float = 1.31
+    sun_azimuth_deg: float = 0.0
 
     def __post_init__(self) -> None:
         # the paper's scale; at k = 10 the sun is 0.07 deg high and 1/1024 as bright: night

@@ -1,7 +1,7 @@
 """Daylight and the camera's exposure, from the sun's intensity and elevation (pure numerics).
 
 The paper's illumination levels scale the sun's intensity I and its elevation by 0.5^k. The light
-that reaches the town follows from them physically, relative to noon (k = 0, elevation 72 deg):
+that reaches the town follows from them physically, relative to noon (k = 0, elevation 75 deg):
 
 - direct sunlight: I times the clear-sky transmittance of the air mass it crosses, tau^(m^0.678)
   (Meinel and Meinel's beam model, tau = 0.7; air mass m from Kasten and Young's formula), which
