@@ -308,7 +308,9 @@ def _build_map(args: argparse.Namespace) -> int:
 
     gallery = Gallery.load(args.gallery)
     conf = method_conf(args.method)
-    mapping = MappingConfig(pairs=args.pairs, num_pairs=args.num_pairs)
+    mapping = MappingConfig(
+        pairs=args.pairs, num_pairs=args.num_pairs, verification=args.verification
+    )
     out = args.out or default_map_dir("maps", gallery, args.method, conf, mapping)
 
     def progress(stage: str, done: int, total: int) -> None:
@@ -475,8 +477,11 @@ def _add_map_verbs(sub: Any, shared: dict[str, argparse.ArgumentParser]) -> None
     p.add_argument("gallery", type=Path, help="gallery folder (see `vlocbench gallery`)")
     p.add_argument("--method", default="sift", help="sift, orb-teblid, aliked-lightglue, ...")
     p.add_argument("--out", type=Path, help="map folder (default: maps/GALLERY/METHOD-HASH)")
-    p.add_argument("--pairs", choices=("poses", "retrieval"), default="poses")
+    p.add_argument("--pairs", choices=("retrieval", "poses"), default="retrieval",
+                   help="top global-descriptor matches (the paper's) or the nearest cameras")
     p.add_argument("--num-pairs", type=_count, default=25)
+    p.add_argument("--verification", choices=("epipolar", "sampson"), default="epipolar",
+                   help="hloc's epipolar-line test with the known poses, or the Sampson distance")
     p.add_argument("--overwrite", action="store_true", help="recompute cached stages")
     p.set_defaults(func=_build_map)
 

@@ -192,8 +192,10 @@ def test_bad_localizer_and_mapping_configs():
         LocalizerConfig(confident_inliers=-1)
     with pytest.raises(ConfigError, match=r"localizer\.retrieval.*valid: map, pose-prior"):
         LocalizerConfig(retrieval="gps")
-    with pytest.raises(ConfigError, match=r"mapping\.pairs"):
+    with pytest.raises(ConfigError, match=r"mapping\.pairs.*valid: poses, retrieval"):
         MappingConfig(pairs="random")
+    with pytest.raises(ConfigError, match=r"mapping\.verification.*valid: epipolar, sampson"):
+        MappingConfig(verification="none")
 
 
 def test_a_rig_is_localized_by_one_generalized_pnp(sim, stretch, sift_map):

@@ -64,6 +64,42 @@ def test_sampson_distance_of_exact_and_shifted_points():
     )
 
 
+def test_hlocs_verification_bounds_each_images_epipolar_distance():
+    from vlocbench.loc.mapping import MappingConfig, epipolar_line_px, verified
+
+    K = np.array([[100.0, 0, 50], [0, 200, 50], [0, 0, 1]])  # fy = 2 fx: lines in b move 2x
+    F = np.linalg.inv(K).T @ np.array([[0, 0, 0], [0, 0, -1], [0, 1, 0]]) @ np.linalg.inv(K)
+    xa = np.array([[10.0, 20.0], [60.0, 70.0], [30.0, 40.0]])
+    xb = xa + np.array([[5.0, 0.0], [0.0, 3.0], [0.0, 5.0]])
+    assert epipolar_line_px(F, xa, xb) == pytest.approx(np.array([[0, 0], [3, 3], [5, 5]]))
+    # 3 px off the line in each image: kept by hloc's test (each <= 4), not by Sampson's (2.1)
+    # at a 2 px bound; at 5 px each, the Sampson distance 3.5 px passes a 4 px bound
+    assert verified(MappingConfig(), F, xa, xb).tolist() == [True, True, False]
+    assert verified(MappingConfig(verification="sampson"), F, xa, xb).tolist() == [
+        True, True, True,
+    ]  # fmt: skip
+    tight = MappingConfig(verification="sampson", epipolar_max_px=2.0)
+    assert verified(tight, F, xa, xb).tolist() == [True, False, False]
+
+
+def test_retrieval_pairs_are_the_papers_top_k_with_the_image_itself(gallery):
+    from vlocbench.loc.mapping import MappingConfig, _pairs
+
+    rng = np.random.default_rng(0)
+    descriptors = rng.normal(size=(len(gallery), 8)).astype(np.float32)
+    descriptors /= np.linalg.norm(descriptors, axis=1, keepdims=True)
+    pairs = _pairs(gallery, MappingConfig(num_pairs=3), descriptors)
+    # each image's top 3 by similarity hold itself: 2 others each (a pair found twice once)
+    names = gallery.names
+    partners = {n: {b if a == n else a for a, b in pairs if n in (a, b)} for n in names}
+    for i, name in enumerate(names):
+        best = np.argsort(-(descriptors @ descriptors[i]))[:3]
+        assert {names[j] for j in best if j != i} <= partners[name]
+    assert len(pairs) <= 2 * len(names)
+    by_pose = _pairs(gallery, MappingConfig(pairs="poses", num_pairs=3), descriptors)
+    assert len(by_pose) > len(names) and by_pose != pairs
+
+
 def test_maps_are_keyed_by_gallery_method_and_configuration(gallery, tmp_path):
     from vlocbench.loc.mapping import MappingConfig, default_map_dir
 

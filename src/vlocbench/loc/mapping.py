@@ -5,7 +5,7 @@ missing (or with ``overwrite``):
 
     features.h5   local features per gallery image (keyed by image name)
     global.h5     global descriptors per image, retrieval.npz what the descriptor learned
-    pairs.txt     mapping pairs: the nearest gallery poses (default) or the top retrievals
+    pairs.txt     mapping pairs: the top retrievals (default) or the nearest gallery poses
     matches.h5    matches per pair, filtered by the epipolar geometry of the known poses
     database.db, sfm/   the COLMAP database and model (pycolmap ``triangulate_points``)
     map.json      method, gallery, statistics and stage times; written last, so a folder with it
@@ -25,13 +25,13 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import h5py
 import numpy as np
 import pycolmap
 
-from vlocbench.config import config_hash, require
+from vlocbench.config import config_hash, require, require_one_of
 from vlocbench.errors import LocalizationError
 from vlocbench.geometry import invert_pose
 from vlocbench.loc.features import Features
@@ -54,13 +54,26 @@ Progress = Callable[[str, int, int], None]  # stage, done, total
 
 @dataclass(frozen=True)
 class MappingConfig:
-    pairs: str = "poses"  # "poses" (nearest gallery cameras) or "retrieval" (top global matches)
+    """How a gallery's images are paired, and which matches triangulation takes.
+
+    ``pairs="retrieval"`` (the paper's ``SfM_from_camera_poses.py``): each image with its
+    ``num_pairs`` most similar gallery images by the global descriptor, itself among them (so 24
+    others at 25); ``"poses"`` (vlocbench's option; the default of pose-prior methods, which have
+    no descriptor): the ``num_pairs`` nearest other cameras. ``verification="epipolar"`` (hloc's
+    ``geometric_verification`` with the known poses): a match is kept when each keypoint lies within
+    ``epipolar_max_px`` of the other's epipolar line; ``"sampson"`` (vlocbench's option): the
+    Sampson distance, which pools both images' errors, within ``epipolar_max_px``.
+    """
+
+    pairs: Literal["retrieval", "poses"] = "retrieval"
     num_pairs: int = 25
-    epipolar_max_px: float = 4.0  # Sampson distance bound of a match under the known poses
+    verification: Literal["epipolar", "sampson"] = "epipolar"
+    epipolar_max_px: float = 4.0
     min_triangulation_angle_deg: float = 1.5
 
     def __post_init__(self) -> None:
-        require(self.pairs in ("poses", "retrieval"), "mapping.pairs", "must be poses or retrieval")
+        require_one_of(self.pairs, ("retrieval", "poses"), "mapping.pairs")
+        require_one_of(self.verification, ("epipolar", "sampson"), "mapping.verification")
         require(self.num_pairs >= 1, "mapping.num_pairs", "must be >= 1")
         require(self.epipolar_max_px > 0, "mapping.epipolar_max_px", "must be > 0")
 
@@ -158,14 +171,34 @@ def _fundamental(
     return np.linalg.inv(cam_b.K).T @ tx @ R @ np.linalg.inv(cam_a.K)
 
 
-def sampson_px(F: np.ndarray, xa: np.ndarray, xb: np.ndarray) -> np.ndarray:
-    """Sampson distance (px) of correspondences (M, 2) under F."""
+def _epipolar_terms(F: np.ndarray, xa: np.ndarray, xb: np.ndarray) -> tuple[np.ndarray, ...]:
+    """x_b^T F x_a, and the epipolar lines F x_a (in b) and F^T x_b (in a), each (M, 3)."""
     ha = np.hstack([xa, np.ones((len(xa), 1))])
     hb = np.hstack([xb, np.ones((len(xb), 1))])
     Fa, Ftb = ha @ F.T, hb @ F
-    num = np.einsum("ij,ij->i", hb, Fa) ** 2
+    return np.einsum("ij,ij->i", hb, Fa), Fa, Ftb
+
+
+def sampson_px(F: np.ndarray, xa: np.ndarray, xb: np.ndarray) -> np.ndarray:
+    """Sampson distance (px) of correspondences (M, 2) under F."""
+    residual, Fa, Ftb = _epipolar_terms(F, xa, xb)
     den = Fa[:, 0] ** 2 + Fa[:, 1] ** 2 + Ftb[:, 0] ** 2 + Ftb[:, 1] ** 2
-    return np.sqrt(num / np.maximum(den, 1e-12))
+    return np.abs(residual) / np.sqrt(np.maximum(den, 1e-12))
+
+
+def epipolar_line_px(F: np.ndarray, xa: np.ndarray, xb: np.ndarray) -> np.ndarray:
+    """(M, 2): the distance (px) of each x_a from x_b's epipolar line in a, and of x_b from x_a's
+    in b (hloc's ``compute_epipolar_errors``, in pixels of square-pixel cameras)."""
+    residual, Fa, Ftb = _epipolar_terms(F, xa, xb)
+    lines = np.stack([np.hypot(Ftb[:, 0], Ftb[:, 1]), np.hypot(Fa[:, 0], Fa[:, 1])], 1)
+    return np.abs(residual)[:, None] / np.maximum(lines, 1e-12)
+
+
+def verified(mapping: MappingConfig, F: np.ndarray, xa: np.ndarray, xb: np.ndarray) -> np.ndarray:
+    """(M,) bool: the matches (x_a, x_b) that agree with F under ``mapping.verification``."""
+    if mapping.verification == "sampson":
+        return sampson_px(F, xa, xb) < mapping.epipolar_max_px
+    return np.all(epipolar_line_px(F, xa, xb) <= mapping.epipolar_max_px, axis=1)
 
 
 def colmap_camera(cam: CameraModel, camera_id: int) -> pycolmap.Camera:
@@ -238,7 +271,7 @@ def _pairs(
     seen: set[tuple[int, int]] = set()
     for i in range(len(gallery)):
         if mapping.pairs == "retrieval" and descriptors is not None:
-            near = top_k(descriptors[i], descriptors, mapping.num_pairs + 1)
+            near = top_k(descriptors[i], descriptors, mapping.num_pairs)  # itself among them
         else:
             near = nearest_poses(poses, poses[i], mapping.num_pairs + 1)
         seen |= {(min(i, j), max(i, j)) for j in near if j != i}
@@ -265,10 +298,7 @@ def _match(gallery: Gallery, conf: MethodConf, mapping: MappingConfig, features:
                     )
                     F = _fundamental(gallery.cameras[ia.camera], ia.world_from_cam,
                                      gallery.cameras[ib.camera], ib.world_from_cam)  # fmt: skip
-                    m = m[
-                        sampson_px(F, fa.keypoints[m[:, 0]], fb.keypoints[m[:, 1]])
-                        < mapping.epipolar_max_px
-                    ]
+                    m = m[verified(mapping, F, fa.keypoints[m[:, 0]], fb.keypoints[m[:, 1]])]
                 f[_pair_key(a, b)] = m.astype(np.uint32).reshape(-1, 2)
             if progress:
                 progress("matches", len(pairs) - len(todo) + start + len(chunk), len(pairs))
