@@ -88,6 +88,17 @@ def test_drift_at_the_end_of_each_failure_free_stretch():
     # a failure at 5 s splits the drive: 20 m, then 80 m (to within a 2 m sample)
     two = drift_segments(synthetic_result(failures=1))
     assert [s[0] for s in two] == pytest.approx([20.0, 80.0], abs=2.1)
+    # the paper's rule: every stretch longer than 0.3 m counts (a 6 m one between failures at
+    # 5 s and 7 s too); one of 0.3 m or less is a double re-initialization and is left out
+    r = synthetic_result(failures=2)
+    r = dataclasses.replace(r, reinitializations=(
+        r.reinitializations[0], dataclasses.replace(r.reinitializations[1], time_s=7.0)
+    ))  # fmt: skip
+    assert [s[0] for s in drift_segments(r)] == pytest.approx([20.0, 6.1, 72.0], abs=2.1)
+    tr = r.trajectory
+    standing = np.where((tr.time_s > 5.0) & (tr.time_s < 7.0), 20.25, tr.true_x_m)
+    r = dataclasses.replace(r, trajectory=dataclasses.replace(tr, true_x_m=standing))
+    assert len(drift_segments(r)) == 2
 
 
 def test_a_timed_out_episode_counts_a_failure_over_the_route_it_covered():
