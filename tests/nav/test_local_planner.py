@@ -68,14 +68,20 @@ def test_band_has_a_floor_at_rest_and_targets_the_goal_at_the_end():
     assert t.remaining_m == pytest.approx(2.0)
 
 
-def test_closest_point_search_is_local():
+def test_closest_waypoint_is_searched_over_the_route_or_in_a_window():
     # an out-and-back route: the return leg runs 1 m beside the outward one
     out = np.stack([np.arange(0, 51, 2.0), np.zeros(26)], 1)
     back = np.stack([np.arange(50, -1, -2.0), np.ones(26)], 1)
     path = WaypointPath(np.vstack([out, [[52.0, 0.5]], back]))
-    for config in (BAND, LocalPlannerConfig()):
-        planner = LocalPlanner(path, config)
-        t = planner.step(np.array([10.0, 0.9]), 4.0)  # nearer the return leg, but we just started
+    xy = np.array([10.0, 0.9])  # nearer the return leg, but the drive has just started
+    # the paper's planner: the nearest waypoint of the whole route, on the return leg
+    paper = LocalPlanner(path, LocalPlannerConfig()).step(xy, 4.0)
+    assert paper.s_closest_m > 60 and paper.xy[1] == 1.0
+    for config in (
+        LocalPlannerConfig(rule="band", search="window"),
+        LocalPlannerConfig(search="window"),
+    ):
+        t = LocalPlanner(path, config).step(xy, 4.0)
         assert t.s_closest_m < 20 and t.xy[1] == 0.0
 
 
@@ -84,6 +90,8 @@ def test_bad_config():
         LocalPlannerConfig(min_lookahead_s=2.0, max_lookahead_s=1.0)
     with pytest.raises(ConfigError, match=r"local_planner\.rule"):
         LocalPlannerConfig(rule="carrot")
+    with pytest.raises(ConfigError, match=r"local_planner\.search.*valid: route, window"):
+        LocalPlannerConfig(search="nearby")
 
 
 def test_head_of_a_path():

@@ -11,8 +11,11 @@ the car's projection onto the path at its current speed (at least ``min_lookahea
 leaves that band it is recomputed at ``reselect_fraction`` of the band (the far edge by default,
 about 7.8 m ahead on average at 4 m/s), which forgives lateral localization errors more.
 
-The closest point and closest waypoint are searched near the last one (a route may pass the same
-street twice); the paper searched the whole route.
+``search="route"`` (the paper's ``local_planner_pid.py``): the closest waypoint (and the car's
+closest point on the path) is the nearest of the whole route. ``search="window"`` (vlocbench's
+option): only from ``search_behind_m`` behind to ``search_ahead_m`` ahead of the last closest
+point, so that a route that passes the same street twice, or a wrong fix near another part of the
+route, cannot make the target jump there.
 """
 
 from __future__ import annotations
@@ -37,13 +40,15 @@ class LocalPlannerConfig:
     min_lookahead_m: float = 3.0
     # where in the band a recomputed target goes: 0 at its near edge, 1 at its far edge
     reselect_fraction: float = 1.0
-    # the closest point is searched this far behind/ahead of the last one (a route may pass the same
-    # street twice; a global search would jump between its visits)
+    # where the closest waypoint is searched: the whole route, or a window around the last one
+    search: Literal["route", "window"] = "route"
+    # search="window": this far behind/ahead of the last closest point
     search_behind_m: float = 10.0
     search_ahead_m: float = 40.0
 
     def __post_init__(self) -> None:
         require_one_of(self.rule, ("paper", "band"), "local_planner.rule")
+        require_one_of(self.search, ("route", "window"), "local_planner.search")
         require(self.min_lookahead_s >= 0, "local_planner.min_lookahead_s", "must be >= 0")
         require(
             self.max_lookahead_s > self.min_lookahead_s,
@@ -102,7 +107,10 @@ class LocalPlanner:
     def step(self, xy: Array, speed_mps: float) -> LocalTarget:
         """Target for a car believed to be at ``xy`` (2,) moving at ``speed_mps``."""
         c, path = self.config, self.path
-        first, last = path.window(self._s_m, c.search_behind_m, c.search_ahead_m)
+        if c.search == "window":
+            first, last = path.window(self._s_m, c.search_behind_m, c.search_ahead_m)
+        else:
+            first, last = 0, len(path) - 1
         proj = path.project(xy, first, last)
         self._s_m = proj.s_m
         if c.rule == "paper":
