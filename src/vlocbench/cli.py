@@ -477,11 +477,19 @@ def _add_map_verbs(sub: Any, shared: dict[str, argparse.ArgumentParser]) -> None
     p.add_argument("gallery", type=Path, help="gallery folder (see `vlocbench gallery`)")
     p.add_argument("--method", default="sift", help="sift, orb-teblid, aliked-lightglue, ...")
     p.add_argument("--out", type=Path, help="map folder (default: maps/GALLERY/METHOD-HASH)")
-    p.add_argument("--pairs", choices=("retrieval", "poses"), default="retrieval",
-                   help="top global-descriptor matches (the paper's) or the nearest cameras")
+    p.add_argument(
+        "--pairs",
+        choices=("retrieval", "poses"),
+        default="retrieval",
+        help="top global-descriptor matches (the paper's) or the nearest cameras",
+    )
     p.add_argument("--num-pairs", type=_count, default=25)
-    p.add_argument("--verification", choices=("epipolar", "sampson"), default="epipolar",
-                   help="hloc's epipolar-line test with the known poses, or the Sampson distance")
+    p.add_argument(
+        "--verification",
+        choices=("epipolar", "sampson"),
+        default="epipolar",
+        help="hloc's epipolar-line test with the known poses, or the Sampson distance",
+    )
     p.add_argument("--overwrite", action="store_true", help="recompute cached stages")
     p.set_defaults(func=_build_map)
 
