@@ -225,13 +225,18 @@ def test_paper_system_is_the_default():
     assert (c.ekf.odometry_fusion, c.ekf.late_measurements) == ("twist", "current")
     assert c.ekf.mahalanobis_gate == 20.0 and c.ekf.metric_gate_m is None
     assert c.local_planner.rule == "paper" and c.speed_source == "ekf"
+    assert c.local_planner.search == "route"
     assert c.controller.longitudinal.time_base == "step" and not c.controller.brake
-    assert c.failure.causes == ("collision",)
+    assert c.failure.causes == ("collision",) and not c.timeout_is_failure
 
 
-def test_running_out_of_time_is_a_failure_over_the_route_covered(sim, path):
+def test_running_out_of_time_ends_the_drive_over_the_route_covered(sim, path):
     crawl = EpisodeConfig(controller=ControllerConfig(max_throttle=0.002), time_limit_factor=1.0)
     r = run_episode(sim, path, None, crawl)  # about 0.3 m/s: it cannot finish in time
-    assert not r.completed and r.failure_causes[-1] == "timeout"
+    # the paper's harness counts no time-out: F is the failures over the route covered
+    assert not r.completed and "timeout" not in r.failure_causes
     assert 0 < r.route_covered_m < path.length_m / 2
     assert r.failures_per_km == pytest.approx(r.failures / (r.route_covered_m / 1000))
+    counted = run_episode(sim, path, None, dataclasses.replace(crawl, timeout_is_failure=True))
+    assert counted.failure_causes == (*r.failure_causes, "timeout")
+    assert counted.failures_per_km == pytest.approx((r.failures + 1) / (r.route_covered_m / 1000))

@@ -103,11 +103,14 @@ def test_drift_at_the_end_of_each_failure_free_stretch():
 
 def test_a_timed_out_episode_counts_a_failure_over_the_route_it_covered():
     done = synthetic_result(failures=1)
-    late = dataclasses.replace(done, completed=False, route_covered_m=40.0)
+    late = dataclasses.replace(done, completed=False, route_covered_m=40.0, timeout_is_failure=True)
     assert late.failure_causes == ("collision", "timeout")
     assert late.failures == 2 and late.failures_per_km == pytest.approx(2 / 0.04)
     m = episode_metrics(late)
     assert not m.completed and m.failure_causes[-1] == "timeout" and m.route_covered_m == 40.0
+    uncounted = dataclasses.replace(late, timeout_is_failure=False)  # the paper's harness
+    assert uncounted.failure_causes == ("collision",)
+    assert uncounted.failures_per_km == pytest.approx(1 / 0.04)
 
 
 def test_place_recall_counts_a_retrieved_image_within_the_distance_among_the_first_n():

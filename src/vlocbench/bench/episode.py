@@ -85,8 +85,10 @@ class EpisodeConfig:
     localization_rate_hz: float = 2.0
     latency: LatencyConfig = field(default_factory=LatencyConfig)
     # give up after time_limit_factor * (route length / target speed) + 60 s of simulated time;
-    # the time-out is a failure (cause "timeout") and F divides by the route covered until then
+    # F divides by the route covered until then. timeout_is_failure (vlocbench's option): the
+    # time-out is one failure more (cause "timeout"); the paper's harness counted none
     time_limit_factor: float = 3.0
+    timeout_is_failure: bool = False
     # navigate mode: what the speed controller reads, the EKF's speed (the paper's local planner
     # reads the filtered odometry) or the car's true speed (vlocbench's option)
     speed_source: Literal["ekf", "speedometer"] = "ekf"
@@ -398,6 +400,7 @@ class Episode:
             else self.progress.farthest_s_m,
             distance_driven_m=self.distance_m,
             completed=self.progress.finished,
+            timeout_is_failure=c.timeout_is_failure,
             sim_time_s=t,
             wall_time_s=wall_s,
             reinitializations=tuple(self.reinits),

@@ -137,12 +137,12 @@ class EpisodeMetrics:
     route_length_m: float
     route_covered_m: float  # up to the farthest point reached (the whole route if completed)
     distance_driven_m: float
-    completed: bool  # False: it ran out of time, which counts as a failure ("timeout")
+    completed: bool  # False: it ran out of time (a failure, "timeout", if the config says so)
     failures: int
     failures_per_km: float  # over the route covered
     failure_sites_s_m: tuple[float, ...]  # arc length along the route where each failure happened
     failure_sites_xy: tuple[tuple[float, float], ...]  # where the car truly was, world m
-    failure_causes: tuple[str, ...]  # of every failure, a time-out last
+    failure_causes: tuple[str, ...]  # of every failure, a time-out that counts last
     mean_segment_m: float  # mean length driven between failures (the whole route if none)
     tracking_error_mean_m: float
     final_drift_m: float
