@@ -58,23 +58,26 @@ def test_expansion_counts_and_keys():
     tasks = spec.tasks(MAPS)
     kinds = [t.kind for t in tasks]
     # per method and setup: 1 recall + 2 failure; the baseline renders nothing, so k does not
-    # change it: one baseline per repetition serves both setups
+    # change it: one set of baselines serves both setups, of at least 10 seeds
     assert (
-        kinds.count("recall") == 4 and kinds.count("failure") == 8 and kinds.count("baseline") == 2
+        kinds.count("recall") == 4 and kinds.count("failure") == 8 and kinds.count("baseline") == 10
     )
+    assert sorted(t.episode.seed for t in tasks if t.kind == "baseline") == list(range(10))
+    few = _spec(baseline_repetitions=1, recall=False, failure=False).tasks(MAPS)
+    assert len(few) == 2  # never fewer than the methods' repetitions
     assert len({t.key for t in tasks}) == len(tasks)
     assert {t.episode.mode for t in tasks if t.kind == "recall"} == {"ground_truth"}
     assert sorted({t.episode.seed for t in tasks if t.kind == "failure"}) == [0, 1]
     # the same spec gives the same keys; any change to what determines a result changes them
     assert [t.key for t in spec.tasks(MAPS)] == [t.key for t in tasks]
-    other = resolve(dataclasses.replace(spec.spec, seed=7)).tasks(MAPS)
+    other = resolve(dataclasses.replace(spec.spec, seed=50)).tasks(MAPS)
     assert not {t.key for t in other} & {t.key for t in tasks}
     latency = _spec(methods=["sift-vlad"], episode={"latency": {"mode": "none"}})
     base = _spec(methods=["sift-vlad"])
     assert not {t.key for t in latency.tasks(MAPS)} & {t.key for t in base.tasks(MAPS)}
     # traffic changes what the baseline drives through: then setups need their own baselines
     traffic = _spec(sweep={"traffic.cars": [0, 5]}, recall=False, failure=False)
-    assert len(traffic.tasks({})) == 4
+    assert len(traffic.tasks({})) == 20
 
 
 def test_part_of_a_plan_keeps_its_episode_keys():
@@ -134,9 +137,13 @@ def test_bad_experiments_are_clear_errors(tmp_path):
         _spec(sweep={"season": ["summer", "monsoon"]})
     with pytest.raises(ConfigError, match="repetitions: must be >= 1"):
         _spec(repetitions=0)
+    with pytest.raises(ConfigError, match="baseline_repetitions: must be >= 1"):
+        _spec(baseline_repetitions=0)
     with pytest.raises(ConfigError, match="methods: recall and failure episodes need"):
         _spec(methods=[])
-    with pytest.raises(UnknownNameError, match="'sed'; valid: baseline, cache"):
+    with pytest.raises(
+        UnknownNameError, match="'sed'; valid: baseline, baseline_repetitions, cache"
+    ):
         _spec(sed=1)
     with pytest.raises(ConfigError, match="give all of features, matcher and retrieval"):
         _spec(methods=[{"name": "mine", "features": "sift"}])
@@ -177,8 +184,8 @@ def test_episode_keys_are_stable():
     spec = load_experiment("experiments/paper/illumination_reduced.yaml")
     maps = {(t, m.name): f"/m/{t}/{m.name}" for t in spec.spec.towns for m in spec.spec.methods}
     keys = sorted(t.key for t in spec.tasks(maps))
-    assert len(keys) == 102
-    assert hashlib.sha1(" ".join(keys).encode()).hexdigest()[:12] == "fb90b7edbba4"
+    assert len(keys) == 116
+    assert hashlib.sha1(" ".join(keys).encode()).hexdigest()[:12] == "713a5e4d21e0"
 
 
 def test_a_ros_node_is_a_method_without_a_map():

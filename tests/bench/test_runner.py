@@ -24,7 +24,7 @@ from vlocbench.loc.mapping import MAP_FILE
 def _fake_tasks():
     spec = load_experiment({"name": "fake", "towns": ["town10"], "methods": ["sift-vlad"],
                             "sweep": {"illumination.k": [0, 6]}, "repetitions": 2})  # fmt: skip
-    return spec.tasks({("town10", "sift-vlad"): "/nowhere/g/m"})  # 2 x (1 + 2) + 2 = 8
+    return spec.tasks({("town10", "sift-vlad"): "/nowhere/g/m"})  # 2 x (1 + 2) + 10 = 16
 
 
 @pytest.fixture
@@ -227,6 +227,7 @@ def tiny(tmp_path_factory):
         "methods": ["sift-vlad"],
         "sweep": {"illumination.k": [0, 6]},
         "repetitions": 1,
+        "baseline_repetitions": 1,  # one odometry drive: the suite stays fast
         "gallery": {"camera": {"intrinsics": {"width": 320, "height": 240}}},
         "output": str(root / "out"),
         "cache": str(root / "cache"),
@@ -519,7 +520,13 @@ def _run_fake_plans(root, *plans):
             execute(todo, store, workers=1, runner=run_fake, progress=False)
 
 
-_ILL = {"name": "ill", "towns": ["town10"], "methods": ["sift-vlad"], "repetitions": 1}
+_ILL = {
+    "name": "ill",
+    "towns": ["town10"],
+    "methods": ["sift-vlad"],
+    "repetitions": 1,
+    "baseline_repetitions": 1,
+}
 
 
 def test_episodes_another_sweep_ran_first_count_under_this_plans_setups(tmp_path):

@@ -121,6 +121,9 @@ class ExperimentSpec:
     methods: tuple[MethodSpec, ...]
     sweep: tuple[tuple[str, Any], ...] = ()  # (key, value or list of levels), as in the file
     repetitions: int = 5
+    # the odometry-only line is driven max(repetitions, baseline_repetitions) times: it renders
+    # nothing, so its interval can be narrow for little time
+    baseline_repetitions: int = 10
     seed: int = 0
     recall: bool = True
     failure: bool = True
@@ -136,6 +139,7 @@ class ExperimentSpec:
         require(bool(self.name.strip()), "name", "must not be empty")
         require(len(self.towns) > 0, "towns", "needs at least one town")
         require(self.repetitions >= 1, "repetitions", "must be >= 1")
+        require(self.baseline_repetitions >= 1, "baseline_repetitions", "must be >= 1")
         require(
             self.route_length_m == 0 or self.route_length_m >= 50,
             "route_length_m",
@@ -307,7 +311,8 @@ class ExperimentPlan:
             if s.failure:
                 jobs += [("failure", method, r) for r in range(s.repetitions)]
         if s.baseline:
-            jobs += [("baseline", None, r) for r in range(s.repetitions)]
+            runs = max(s.repetitions, s.baseline_repetitions)
+            jobs += [("baseline", None, r) for r in range(runs)]
         return jobs
 
     def _task(self, town: str, town_dict: dict[str, Any], setup: Setup, kind: EpisodeKind,
