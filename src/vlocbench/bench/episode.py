@@ -52,7 +52,7 @@ from vlocbench.nav import (
     WaypointPath,
     WheelOdometry,
 )
-from vlocbench.sim import Simulator, VehicleState
+from vlocbench.sim import Simulator, VehicleParams, VehicleState
 
 # part of every episode key: bump when the same config gives a different result
 # 3: the paper's navigation stack as the default (EKF, local planner, controller, collisions only),
@@ -99,6 +99,7 @@ class EpisodeConfig:
     ekf: EkfConfig = field(default_factory=EkfConfig)
     failure: FailureConfig = field(default_factory=FailureConfig)
     progress: ProgressConfig = field(default_factory=ProgressConfig)
+    vehicle: VehicleParams = field(default_factory=VehicleParams)
     # ground_truth drives: the EKF has lost lock once its position error stays above lock_lost_m
     # for lock_lost_s (a car navigating on it would be about to hit the kerb or parked cars)
     lock_lost_m: float = 3.0
@@ -204,6 +205,7 @@ class Episode:
         config: EpisodeConfig,
     ) -> None:
         self.sim, self.path, self.localizer, self.config = sim, path, localizer, config
+        sim.set_vehicle(config.vehicle)
         self.dt_s = sim.dt_s
         self.rear_offset_m = 0.5 * sim.params.wheelbase_m
         seeds = np.random.SeedSequence(config.seed).generate_state(2)

@@ -92,6 +92,10 @@ class Simulator:
         if self._renderer is not None:
             self._renderer.apply(conditions)
 
+    def set_vehicle(self, vehicle: VehicleParams) -> None:
+        """Drive the car with other parameters from the next step on."""
+        self.params = vehicle
+
     @property
     def position_xy(self) -> Array:
         return np.array([self.state.x_m, self.state.y_m])

@@ -19,8 +19,13 @@ from vlocbench.interfaces import Array, Control
 
 @dataclass(frozen=True)
 class VehicleParams:
+    """The car. The defaults are the paper's ``vehicle.tesla.model3`` as CARLA builds it: front
+    wheels that steer up to 70 deg (CARLA's ``WheelPhysicsControl.max_steer_angle``), a 2.9 m
+    wheelbase (the Model 3's 2.875 m). ``max_steer_deg: 35`` was vlocbench's car until December
+    2026, a road car's usual lock."""
+
     wheelbase_m: float = 2.9
-    max_steer_deg: float = 35.0
+    max_steer_deg: float = 70.0
     max_steer_rate_deg_s: float = 120.0
     max_accel_mps2: float = 3.0
     max_brake_mps2: float = 8.0
