@@ -206,12 +206,19 @@ def test_bad_episode_config():
         from_dict(EpisodeConfig, {"lock_lost_m": 0})
     with pytest.raises(ConfigError, match="lock_lost_s: must be >= 0"):
         EpisodeConfig(lock_lost_s=-1.0)
+    with pytest.raises(ConfigError, match=r"vehicle\.max_steer_deg: must be in \(0, 80\)"):
+        from_dict(EpisodeConfig, {"vehicle": {"max_steer_deg": 90}})
+    with pytest.raises(UnknownNameError, match="'steer_deg'; valid: actuator_tau_s"):
+        from_dict(EpisodeConfig, {"vehicle": {"steer_deg": 35}})
+    with pytest.raises(ConfigError, match="timeout_is_failure: expected true or false"):
+        from_dict(EpisodeConfig, {"timeout_is_failure": "yes"})
     cfg = from_dict(EpisodeConfig, {"latency": {"mode": "none"}, "ekf": {"metric_gate_m": None}})
     assert cfg.latency.mode == "none" and cfg.ekf.metric_gate_m is None
     # options that do not exist name the valid ones, wherever they are nested
     for data, valid in (
         ({"ekf": {"odometry_fusion": "gps"}}, "valid: input, twist"),
         ({"local_planner": {"rule": "carrot"}}, "valid: band, paper"),
+        ({"local_planner": {"search": "nearby"}}, "valid: route, window"),
         ({"failure": {"causes": ["collision", "boredom"]}}, "valid: collision, off_route, stuck"),
         ({"speed_source": "gps"}, "valid: ekf, speedometer"),
         ({"controller": {"longitudinal": {"kp": 1, "time_base": "hour"}}}, "valid: second, step"),
