@@ -61,13 +61,8 @@ def test_sensor_noise_equals_its_definition_bit_for_bit():
         np.testing.assert_array_equal(got, expected)
 
 
-def test_noiseless_sensor_equals_its_definition_bit_for_bit():
-    """Without noise the camera only darkens (by a table of the 256 levels): the same values as
-    the float32 arithmetic written out, and a C-ordered array even from a flipped view."""
+def test_noiseless_sensor_returns_the_render_c_ordered():
     image = np.random.default_rng(1).integers(0, 256, (60, 80, 3), dtype=np.uint8)[::-1]
-    for exposure in (1.0, 0.132, 0.0163, 0.00259):
-        share = np.float32(exposure ** (1 / 2.2)) if exposure < 1 else np.float32(1)
-        expected = np.clip(image.astype(np.float32) * share + 0.5, 0, 255).astype(np.uint8)
-        got = sensor_noise(image, 96.0, 0.0, 0.0, np.random.default_rng(2), exposure)
-        np.testing.assert_array_equal(got, expected)
-        assert got.flags.c_contiguous
+    got = sensor_noise(image, 96.0, 0.0, 0.0, np.random.default_rng(2))
+    np.testing.assert_array_equal(got, image)
+    assert got.flags.c_contiguous

@@ -6,6 +6,7 @@ import cv2
 import numpy as np
 import pytest
 
+from vlocbench.errors import ConfigError, UnknownNameError
 from vlocbench.geometry import invert_pose, planar_pose
 from vlocbench.sim import (
     Camera,
@@ -16,6 +17,7 @@ from vlocbench.sim import (
     Illumination,
     Intrinsics,
     Simulator,
+    StreetLights,
     Weather,
     gallery_camera,
     generate_town,
@@ -50,9 +52,14 @@ def test_same_seed_same_image_bytes(small_town, small_sim):
 
 
 def test_brightness_falls_with_k(small_sim):
-    fixed = Exposure("fixed")
+    fixed, unlit = Exposure("fixed"), StreetLights("off")
     means = [
-        gray(render(small_sim, Conditions(illumination=Illumination(k=k), exposure=fixed))).mean()
+        gray(
+            render(
+                small_sim,
+                Conditions(illumination=Illumination(k=k), exposure=fixed, street_lights=unlit),
+            )
+        ).mean()
         for k in (0, 2, 4, 10)
     ]
     assert all(a > b for a, b in itertools.pairwise(means[:3])), means
@@ -121,13 +128,78 @@ def test_winter_differs_from_summer(small_sim):
 
 def test_headlights_light_the_road_at_night(small_sim):
     front = Camera("front", SMALL, Extrinsics(z_m=1.6, yaw_deg=0.0, pitch_deg=5.0))
-    dark = gray(render(small_sim, Conditions(illumination=Illumination(k=10)), front))
+    unlit = StreetLights("off")
+    dark = gray(
+        render(small_sim, Conditions(illumination=Illumination(k=10), street_lights=unlit), front)
+    )
     assert small_sim.renderer.exposure_share < 0.01  # far beyond the camera's range
-    night = Conditions(illumination=Illumination(k=10), headlights=Headlights(on=True))
+    night = Conditions(
+        illumination=Illumination(k=10), headlights=Headlights(on=True), street_lights=unlit
+    )
     lit = gray(render(small_sim, night, front))
     assert small_sim.renderer.exposure_share == 1.0  # the meter sees the headlights
     road = slice(SMALL.height // 2 + 20, None)
     assert dark[road].mean() < 5 and lit[road].mean() > 20
+
+
+def lamp_view(sim):
+    """A camera 8 m before the town's first lamp, looking along its curb, a little up (320x240)."""
+    x, y, yaw = sim.town.lamps[0]
+    # stand on the road beside the lamp, 8 m before it along the curb, facing along the curb
+    along = np.array([np.sin(yaw), -np.cos(yaw)])
+    road = np.array([np.cos(yaw), np.sin(yaw)])
+    at = np.array([x, y]) + 3.0 * road - 8.0 * along
+    sim.teleport(float(at[0]), float(at[1]), float(np.arctan2(along[1], along[0])))
+    return Camera("front", SMALL, Extrinsics(x_m=0.0, z_m=1.6, yaw_deg=0.0, pitch_deg=-15.0))
+
+
+def night_image(sim, camera, street_lights):
+    night = Conditions(illumination=Illumination(k=10), street_lights=street_lights)
+    sim.set_conditions(night)
+    return sim.render([camera], frame_id=0)[0].image
+
+
+def test_street_lights_are_on_at_night_only_and_light_the_road(small_sim):
+    camera = lamp_view(small_sim)
+    lit = night_image(small_sim, camera, StreetLights())
+    assert small_sim.renderer.street_lights_on  # k = 10: below the photocell's threshold
+    unlit = night_image(small_sim, camera, StreetLights("off"))
+    lit_grey, unlit_grey = (cv2.cvtColor(i, cv2.COLOR_RGB2GRAY).astype(float) for i in (lit, unlit))
+    road = slice(-50, None)
+    assert unlit_grey[road].mean() < 5
+    assert lit_grey[road].mean() > unlit_grey[road].mean() + 5  # a pool of light
+    assert lit_grey.max() > 200  # the lamp's head glows
+    # by day they are off, and the day's images are as without them, byte for byte
+    small_sim.set_conditions(Conditions(illumination=Illumination(k=4)))
+    assert not small_sim.renderer.street_lights_on
+    day = small_sim.render([camera], frame_id=0)[0].image
+    small_sim.set_conditions(
+        Conditions(illumination=Illumination(k=4), street_lights=StreetLights("off"))
+    )
+    assert day.tobytes() == small_sim.render([camera], frame_id=0)[0].image.tobytes()
+
+
+def test_lit_windows_follow_their_share(small_sim):
+    camera = Camera("g", SMALL, Extrinsics())
+    wp = small_sim.town.route.waypoints_xy[10]
+    small_sim.teleport(float(wp[0]), float(wp[1]), float(small_sim.town.route.yaw_rad[10]))
+    none, some, every = (
+        night_image(
+            small_sim, camera, StreetLights(mode="on", lamp_illuminance=0.0, window_share=s)
+        )
+        for s in (0.0, 0.3, 1.0)
+    )
+    warm = [((i[..., 0].astype(int) - i[..., 2]) > 15).mean() for i in (none, some, every)]
+    assert warm[0] < 0.001 < warm[1] < warm[2], warm  # warm light in a share of the windows
+
+
+def test_street_lights_bad_input_names_the_field():
+    with pytest.raises(UnknownNameError, match=r"street_lights\.mode.*auto"):
+        StreetLights(mode="dusk")
+    with pytest.raises(ConfigError, match=r"street_lights\.window_share"):
+        StreetLights(window_share=1.5)
+    with pytest.raises(ConfigError, match=r"street_lights\.lamp_illuminance"):
+        StreetLights(lamp_illuminance=-1.0)
 
 
 def test_projection_matches_the_render(small_sim):

@@ -62,7 +62,9 @@ from vlocbench.sim import Simulator, VehicleParams, VehicleState
 # 5: the paper's code as the default (issue 26): each (query keypoint, 3D point) one PnP
 #    correspondence, the local planner's search over the whole route, time-outs not counted, the
 #    car's 70 deg steering (the sun and the maps change keys through their own configs)
-EPISODE_VERSION = 5
+# 6: the town's lights at night (street lamps, lit windows); every light of a scene beyond the
+#    camera's range scaled by its exposure share before the 8-bit quantization, not after
+EPISODE_VERSION = 6
 
 
 @dataclass(frozen=True)

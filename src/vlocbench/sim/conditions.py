@@ -2,7 +2,7 @@
 
 All ten factors of the paper's Table 1 are parameters here: illumination, weather, viewpoint,
 scene structure (the town), season, camera extrinsics / intrinsics / several cameras (see
-``camera.py``), dynamic objects and headlights.
+``camera.py``), dynamic objects and headlights; and the town's own lights at night.
 """
 
 from __future__ import annotations
@@ -140,6 +140,48 @@ class Headlights:
         require(0 < self.cutoff_deg <= 90, "headlights.cutoff_deg", "must be in (0, 90]")
 
 
+StreetLightMode = Literal["auto", "on", "off"]
+
+
+@dataclass(frozen=True)
+class StreetLights:
+    """The town's lights, as CARLA (0.9.10 on) switches them on when the sun goes down: street
+    lamps (a pool of light on the road and the facades around each, a glowing lamp head) and a
+    share of lit windows.
+
+    Light levels are relative to noon's (the daylight on the ground at k = 0 is 1; a white
+    surface at noon has luminance 1). ``auto`` switches them on when the daylight on the ground
+    falls below ``switch_on_below``, a photocell's threshold (3e-4: about 30 lx of noon's
+    100 klx; k >= 8 on the paper's scale). ``lamp_illuminance`` is the light on the road under a
+    lamp (2e-4: 20 lx, a residential street's), ``window_luminance`` that of a lit window
+    (6e-4: about 20 cd/m2) and ``window_share`` the share of windows lit. CARLA decides its switch
+    in a Blueprint, not in its source, so the threshold is a photocell's, not read from CARLA.
+    """
+
+    mode: StreetLightMode = "auto"
+    switch_on_below: float = 3e-4
+    lamp_illuminance: float = 2e-4
+    window_luminance: float = 6e-4
+    window_share: float = 0.3
+
+    def __post_init__(self) -> None:
+        require_one_of(self.mode, ("auto", "on", "off"), "street_lights.mode")
+        for name in ("switch_on_below", "lamp_illuminance", "window_luminance"):
+            v = getattr(self, name)
+            require(
+                0 <= v <= 1, f"street_lights.{name}", f"must be in [0, 1] (of noon's), got {v:g}"
+            )
+        require(
+            0 <= self.window_share <= 1,
+            "street_lights.window_share",
+            f"must be in [0, 1], got {self.window_share:g}",
+        )
+
+    def on(self, daylight_share: float) -> bool:
+        """Whether the lights are on when the ground gets ``daylight_share`` of noon's light."""
+        return self.mode == "on" or (self.mode == "auto" and daylight_share < self.switch_on_below)
+
+
 @dataclass(frozen=True)
 class Exposure:
     """The camera, by default CARLA's kind (the paper's): ``auto`` exposure meters the daylight and
@@ -173,6 +215,7 @@ class Conditions:
     traffic: Traffic = field(default_factory=Traffic)
     headlights: Headlights = field(default_factory=Headlights)
     exposure: Exposure = field(default_factory=Exposure)
+    street_lights: StreetLights = field(default_factory=StreetLights)
 
     def __post_init__(self) -> None:
         if self.season not in SEASONS:

@@ -11,10 +11,11 @@ that reaches the town follows from them physically, relative to noon (k = 0, ele
 - overcast moves light from the sun to the sky.
 
 The camera meters that light and opens up (longer exposure, then gain) by up to ``max_gain``
-(its exposure range). The scene is rendered as the metered exposure would show it, so a dim scene
-keeps its full tonal resolution; beyond the range the camera reaches only a share e < 1 of that
-exposure, and its gamma-encoded output (display = linear^(1/2.2), as sRGB and CARLA's tone curve)
-darkens by e^(1/2.2) before the 8-bit quantization. Sensor noise grows with the gain: photon
+(its exposure range). The scene is rendered as the camera records it: at the metered exposure
+where it reaches that; beyond its range it reaches only a share e < 1 of it, and its
+gamma-encoded output (display = linear^(1/2.2), as sRGB and CARLA's tone curve) is darker by
+e^(1/2.2): every light of the scene is scaled by it, so the 8-bit quantization comes once, last.
+The town's own lights (street lamps, lit windows) are set in the same display values. Sensor noise grows with the gain: photon
 shot noise (variance ``shot_noise * gain`` per grey level) and read noise (``read_noise * gain``).
 The camera's range is calibrated once, against the recall the paper measured at each k
 (``benchmarks/bench_illumination.py``); see the README.
@@ -82,23 +83,13 @@ def sensor_noise(
     shot_noise: float,
     read_noise: float,
     rng: np.random.Generator,
-    exposure: float = 1.0,
 ) -> np.ndarray:
-    """``image`` (H, W, 3) uint8, rendered at the metered exposure, as the camera records it: first
-    darkened by the share ``exposure`` (<= 1) of that exposure it reached (display values times
-    exposure^(1/DISPLAY_GAMMA)), then with the shot and read noise of a sensor at ``gain``: per
-    pixel sigma^2 = shot_noise * gain * grey + (read_noise * gain)^2 (grey levels), one draw per
-    pixel."""
-    darken = np.float32(exposure ** (1.0 / DISPLAY_GAMMA)) if exposure < 1.0 else None
+    """``image`` (H, W, 3) uint8, rendered at the exposure the camera reached, with the shot and
+    read noise of a sensor at ``gain``: per pixel sigma^2 = shot_noise * gain * grey +
+    (read_noise * gain)^2 (grey levels), one draw per pixel."""
     if shot_noise == 0 and read_noise == 0:
-        # noiseless: the same float32 steps as below, on the 256 levels (one table look-up)
-        if darken is None:
-            return np.ascontiguousarray(image)
-        levels = np.arange(256, dtype=np.float32) * darken + np.float32(0.5)
-        return np.clip(levels, 0, 255).astype(np.uint8)[image]
+        return np.ascontiguousarray(image)
     rgb = image.astype(np.float32)
-    if darken is not None:
-        rgb *= darken
     # the channels' mean summed in order: in float32 exactly numpy's mean, without its slow reduce
     grey = rgb[..., 0] + rgb[..., 1]
     grey += rgb[..., 2]

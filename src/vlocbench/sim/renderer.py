@@ -18,13 +18,22 @@ from vlocbench.interfaces import Image
 from vlocbench.sim import textures as tex
 from vlocbench.sim.backend import missing_libraries_error, select_backend
 from vlocbench.sim.conditions import Conditions
-from vlocbench.sim.light import NOON_AMBIENT, daylight, exposure_gain, sensor_noise
+from vlocbench.sim.light import (
+    DISPLAY_GAMMA,
+    NOON_AMBIENT,
+    daylight,
+    exposure_gain,
+    sensor_noise,
+)
 from vlocbench.sim.rain import apply_rain
 from vlocbench.sim.scene import (
     GROUP_COLLISION,
     GROUP_EGO,
     GROUP_FOLIAGE_FULL,
     GROUP_FOLIAGE_SPARSE,
+    LAMP_HEIGHT_M,
+    LAMP_REACH_M,
+    NIGHT_PARKED_Z_M,
     SKY_SIZE,
     TownScene,
 )
@@ -33,6 +42,10 @@ NEAR_M, FAR_M = 0.1, 2000.0
 # what the camera's light meter reads of the car's own headlights, per unit of their intensity
 HEADLIGHT_METERING = 0.2
 ANTIALIAS_SAMPLES = 4  # MuJoCo's default multisampling of offscreen images
+# MuJoCo's classic renderer draws with OpenGL's fixed-function lights: at most 8 in a frame
+# (measured: a 9th and later lights of the scene add nothing)
+MAX_FRAME_LIGHTS = 8
+LAMP_AIM_AHEAD_M = 15.0  # lamps are lit nearest first to this point ahead of the camera
 LEAVES = {"summer": (0.33, 0.55, 0.22), "autumn": (0.85, 0.45, 0.12), "winter": (0.5, 0.5, 0.5)}
 
 
@@ -75,6 +88,8 @@ class Renderer:
         self._renderers: dict[tuple[int, int, int], mujoco.Renderer] = {}
         self.option = mujoco.MjvOption()
         self.conditions = conditions or Conditions()
+        self._night_z = scene.model.geom_pos[list(scene.night_geom_ids), 2].copy()
+        self._window_share = 0.0  # as the scene is built
         self.apply(self.conditions)
 
     # -- conditions -----------------------------------------------------------------------------
@@ -96,20 +111,26 @@ class Renderer:
         e = conditions.exposure
         noon = daylight(1.0, ill.sun_elevation_base_rad, 0.0, ill.sun_elevation_base_rad)
         headlight_reading = HEADLIGHT_METERING * h.intensity if h.on else 0.0
-        # the scene is lit as the metered exposure shows it; a camera that cannot reach it
-        # (beyond its range, or fixed) records the share it reached, darker (sensor_noise)
+        # the scene is lit as the camera records it (MuJoCo's colours are display values): at
+        # the metered exposure g where the camera reaches it; one that cannot (beyond its range,
+        # or fixed) records the share it reached, darker through its gamma
         g = exposure_gain(light, noon, headlight_reading, np.inf)
         self.gain = min(g, e.max_gain) if e.mode == "auto" else 1.0
         self.exposure_share = self.gain / g
-        m.light_diffuse[sc.sun_light_id] = sun_color * light.direct * g
-        m.light_ambient[sc.sun_light_id] = np.array([0.92, 0.95, 1.0]) * light.ambient * g
-        m.light_specular[sc.sun_light_id] = 0.2 * light.direct * g
+        level = g * self.exposure_share ** (1 / DISPLAY_GAMMA)
+        m.light_diffuse[sc.sun_light_id] = sun_color * light.direct * level
+        m.light_ambient[sc.sun_light_id] = np.array([0.92, 0.95, 1.0]) * light.ambient * level
+        m.light_specular[sc.sun_light_id] = 0.2 * light.direct * level
         for lid in sc.headlight_ids:
             m.light_active[lid] = h.on
-            m.light_diffuse[lid] = np.array([1.0, 0.97, 0.88]) * h.intensity * g
+            m.light_diffuse[lid] = np.array([1.0, 0.97, 0.88]) * h.intensity * level
             m.light_cutoff[lid] = h.cutoff_deg
         # the sky's luminance follows the skylight; displayed with a gamma of about 1 / 2.2
-        self.sky_brightness = float(np.clip(light.ambient * g / NOON_AMBIENT, 0, 1) ** 0.45)
+        self.sky_brightness = float(
+            np.clip(light.ambient * g / NOON_AMBIENT, 0, 1) ** 0.45
+            * self.exposure_share ** (1 / DISPLAY_GAMMA)
+        )
+        self._apply_street_lights(conditions, light.horizontal / noon.horizontal)
         self._apply_season(conditions)
         wet = w.ground_wetness
         for name in ("road", "intersection", "paving", "crosswalk"):
@@ -126,10 +147,30 @@ class Renderer:
         start = m.tex_adr[sc.sky_texture_id]
         m.tex_data[start : start + image.size] = image.ravel()
         for r in self._renderers.values():
-            self._upload_sky(r)
+            self._upload_texture(r, sc.sky_texture_id)
         # lights are drawn from data.light_xdir/xpos, which only mj_camlight derives from the
         # model's light_dir: without this the old sun shone until the next simulation step
         sc.forward()
+
+    def _apply_street_lights(self, c: Conditions, daylight_share: float) -> None:
+        """Lamps and lit windows on or off; their brightness as this camera records it (a
+        white surface at noon displays 1)."""
+        m, sc, sl = self.scene.model, self.scene, c.street_lights
+        self.street_lights_on = sl.on(daylight_share)
+        for gid, z in zip(sc.night_geom_ids, self._night_z, strict=True):
+            m.geom_pos[gid, 2] = z if self.street_lights_on else z + NIGHT_PARKED_Z_M
+        # under a lamp, the road's white would display this (a point light, 1/d in display
+        # values: about 1/d^2 through the camera's gamma)
+        self.lamp_level = (sl.lamp_illuminance * self.gain) ** (1 / DISPLAY_GAMMA)
+        window = (sl.window_luminance * self.gain) ** (1 / DISPLAY_GAMMA)
+        m.mat_emission[sc.material_ids["windows_lit"]] = min(window, 1.0)
+        if sl.window_share != self._window_share:
+            self._window_share = sl.window_share
+            image = tex.lit_windows(sl.window_share)
+            start = m.tex_adr[sc.window_texture_id]
+            m.tex_data[start : start + image.size] = image.ravel()
+            for r in self._renderers.values():
+                self._upload_texture(r, sc.window_texture_id)
 
     def _apply_season(self, c: Conditions) -> None:
         m, sc = self.scene.model, self.scene
@@ -146,9 +187,9 @@ class Renderer:
         groups[GROUP_FOLIAGE_SPARSE] = c.season == "autumn"
         self.option.geomgroup[:] = groups
 
-    def _upload_sky(self, r: mujoco.Renderer) -> None:
+    def _upload_texture(self, r: mujoco.Renderer, texture_id: int) -> None:
         r._gl_context.make_current()
-        mujoco.mjr_uploadTexture(self.scene.model, r._mjr_context, self.scene.sky_texture_id)
+        mujoco.mjr_uploadTexture(self.scene.model, r._mjr_context, texture_id)
 
     # -- rendering ------------------------------------------------------------------------------
     def _renderer(self, width: int, height: int, samples: int) -> mujoco.Renderer:
@@ -163,7 +204,8 @@ class Renderer:
             r.scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = self.shadows
             r.scene.flags[mujoco.mjtRndFlag.mjRND_SKYBOX] = 1
             self._renderers[key] = r
-            self._upload_sky(r)
+            self._upload_texture(r, self.scene.sky_texture_id)
+            self._upload_texture(r, self.scene.window_texture_id)
         return self._renderers[key]
 
     def _set_fog(self, r: mujoco.Renderer) -> None:
@@ -217,6 +259,8 @@ class Renderer:
             cam.frustum_bottom, cam.frustum_top = -half_h, half_h
             cam.frustum_near, cam.frustum_far = NEAR_M, FAR_M
             cam.orthographic = 0
+        if self.street_lights_on:
+            self._add_lamps(r.scene, pos + LAMP_AIM_AHEAD_M * _horizontal(rot[:, 2]))
         if markers_world is not None:
             self._add_markers(r.scene, markers_world, marker_radius_m, (1.0, 0.0, 0.0))
         self._set_fog(r)
@@ -227,13 +271,33 @@ class Renderer:
             image = apply_rain(image, rain, self.sky_brightness, np.random.default_rng(seed))
         e = self.conditions.exposure
         return sensor_noise(
-            image,
-            self.gain,
-            e.shot_noise,
-            e.read_noise,
-            np.random.default_rng(seed + 1),
-            self.exposure_share,
+            image, self.gain, e.shot_noise, e.read_noise, np.random.default_rng(seed + 1)
         )
+
+    def _add_lamps(self, scene: mujoco.MjvScene, aim_world: NDArray[np.float64]) -> None:
+        """The street lamps nearest to ``aim_world`` (3,), as many as the frame has lights left:
+        spot lights pointing down from the lamps' heads."""
+        lamps = self.scene.town.lamps  # (N, 3): x, y, arm yaw
+        free = MAX_FRAME_LIGHTS - scene.nlight
+        if free <= 0 or len(lamps) == 0:
+            return
+        heads = lamps[:, :2] + LAMP_REACH_M * np.stack(
+            [np.cos(lamps[:, 2]), np.sin(lamps[:, 2])], 1
+        )
+        nearest = np.argsort(np.hypot(*(heads - aim_world[:2]).T), kind="stable")[:free]
+        for i in nearest:
+            light = scene.lights[scene.nlight]
+            light.type = mujoco.mjtLightType.mjLIGHT_SPOT
+            light.headlight = 0
+            light.castshadow = 0
+            light.pos[:] = [*heads[i], LAMP_HEIGHT_M]
+            light.dir[:] = [0.0, 0.0, -1.0]
+            light.cutoff, light.exponent = 80.0, 1.0
+            light.attenuation[:] = [0.0, 1.0, 0.0]  # 1/d: at the road under the head, lamp_level
+            light.diffuse[:] = np.array([1.0, 0.9, 0.72]) * self.lamp_level * LAMP_HEIGHT_M
+            light.ambient[:] = 0.0
+            light.specular[:] = 0.1 * self.lamp_level
+            scene.nlight += 1
 
     @staticmethod
     def _add_markers(
@@ -258,3 +322,10 @@ class Renderer:
         for r in self._renderers.values():
             r.close()
         self._renderers.clear()
+
+
+def _horizontal(direction: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``direction`` (3,) projected onto the ground plane, unit length ((0, 0, 0) if vertical)."""
+    flat = np.array([direction[0], direction[1], 0.0])
+    norm = np.linalg.norm(flat)
+    return flat / norm if norm > 1e-9 else flat

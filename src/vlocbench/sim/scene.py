@@ -25,6 +25,12 @@ from vlocbench.sim.town import Town
 
 GROUP_STATIC, GROUP_FOLIAGE_FULL, GROUP_FOLIAGE_SPARSE = 0, 1, 2
 GROUP_TRAFFIC, GROUP_COLLISION, GROUP_EGO = 3, 4, 5
+# meshes of the town's lights at night (lamp heads, lit windows): parked this far below the town
+# by day, so that day images do not change with them
+NIGHT_MESHES = ("lamp_glow", "windows_lit")
+NIGHT_PARKED_Z_M = -1000.0
+LAMP_HEIGHT_M = 6.2  # the underside of a lamp's head, where its light leaves
+LAMP_REACH_M = 1.7  # from the pole to the head, towards the road
 # bump when the look of the towns changes: galleries and maps (and results) are keyed by it
 SCENE_VERSION = 5
 GROUND_FLOOR_M = 4.2
@@ -74,6 +80,8 @@ class TownScene:
     sky_texture_id: int
     sun_light_id: int
     headlight_ids: tuple[int, int]
+    night_geom_ids: tuple[int, ...]  # the NIGHT_MESHES geoms
+    window_texture_id: int
     ego_qpos_adr: int
     car_qpos_adr: tuple[int, ...]
     pedestrian_qpos_adr: tuple[int, ...]
@@ -211,6 +219,11 @@ class _SceneBuilder:
         self.material("metal", "metal", specular=0.4, shininess=0.5)
         self.material("signs", "signs", specular=0.3)
         self.material("glass", None, (0.08, 0.1, 0.12, 1), specular=0.8, shininess=0.9)
+        # the town's lights at night: a lamp's diffuser glows at any exposure; a lit window's
+        # glow is set by the renderer, its texture lights the share of windows asked for
+        self.material("lamp_glow", None, (1.0, 0.92, 0.75, 1), specular=0.0, emission=1.0)
+        self.texture("windows_lit", tex.lit_windows(0.0))
+        self.material("windows_lit", "windows_lit", specular=0.0)
         for k, c in enumerate(CAR_COLORS):
             self.material(f"car{k}", None, c, specular=0.6, shininess=0.7)
 
@@ -360,9 +373,12 @@ class _SceneBuilder:
         length_m: float,
         z_range_m: tuple[float, float],
         rng: np.random.Generator,
+        lit: np.random.Generator,
     ) -> None:
-        """A wall of one-bay x one-floor cells, each a random variant of the style's atlas."""
+        """A wall of one-bay x one-floor cells, each a random variant of the style's atlas; ``lit``
+        draws which of its full-height cells have a window lit at night."""
         up = np.array([0.0, 0, 1])
+        normal = np.cross(u, up)  # out of the building: the quads face it
         n = max(1, round(length_m / tile.width_m))
         bay_m = length_m / n  # whole bays: windows never cut at a corner
         uv_per_m = (1 / (tile.variants * bay_m), -1 / tile.height_m)
@@ -378,7 +394,31 @@ class _SceneBuilder:
                     origin + u * (j * bay_m) + up * z, u, up, bay_m, height,
                     (variant / tile.variants, 1.0), uv_per_m, cell,
                 )  # fmt: skip
+                if tile.window is not None and height == tile.height_m:
+                    self.lit_window(tile, origin + u * (j * bay_m) + up * z, u, normal, bay_m, lit)
             z += tile.height_m
+
+    def lit_window(
+        self,
+        tile: tex.FacadeTile,
+        corner: Array,
+        u: Array,
+        normal: Array,
+        bay_m: float,
+        lit: np.random.Generator,
+    ) -> None:
+        """The window of the cell whose bottom-left is ``corner``, as a quad 2 cm in front of it,
+        for the share of windows that are lit at night (a rank in [0, 1) per window: the renderer
+        lights those under ``StreetLights.window_share``, encoded in the texture coordinate u)."""
+        assert tile.window is not None
+        left, top, right, bottom = tile.window
+        rank = float(lit.random())
+        up = np.array([0.0, 0, 1])
+        origin = corner + u * (left * bay_m) + up * ((1 - bottom) * tile.height_m) + normal * 0.02
+        self.meshes["windows_lit"].quad(
+            origin, u, up, (right - left) * bay_m, (bottom - top) * tile.height_m,
+            (rank, 0.5), (0.0, 0.0),
+        )  # fmt: skip
 
     def buildings(self) -> None:
         for k, b in enumerate(self.town.buildings):
@@ -393,6 +433,7 @@ class _SceneBuilder:
             tile = self.tiles[facade]
             # this building's own sequence of window cells and shops
             cells = np.random.default_rng((self.town.spec.seed, k))
+            lit = np.random.default_rng((self.town.spec.seed, k, 1))  # which windows are lit
             for s in range(4):
                 a, c = corners[s], corners[(s + 1) % 4]
                 length = float(np.linalg.norm(c - a))
@@ -401,7 +442,7 @@ class _SceneBuilder:
                 if b.shop >= 0 and sides[s] == b.front:
                     self.shopfronts(a, u, length, b.shop, cells)
                     z0 = GROUND_FLOOR_M
-                self.facade_wall(mat, tile, a, u, length, (z0, b.height_m), cells)
+                self.facade_wall(mat, tile, a, u, length, (z0, b.height_m), cells, lit)
             self.meshes["roof"].quad(
                 np.array([x0, y0, b.height_m]),
                 np.array([1.0, 0, 0]),
@@ -444,8 +485,12 @@ class _SceneBuilder:
             self.meshes["metal"].box(
                 base + d * 0.9 + np.array([0, 0, 6.4]), np.array([0.9, 0.05, 0.05]), yaw
             )
-            self.meshes["metal"].box(
-                base + d * 1.7 + np.array([0, 0, 6.3]), np.array([0.3, 0.15, 0.1]), yaw
+            head = base + d * LAMP_REACH_M + np.array([0, 0, LAMP_HEIGHT_M + 0.1])
+            self.meshes["metal"].box(head, np.array([0.3, 0.15, 0.1]), yaw)
+            # its diffuser, facing down just under the head
+            side = np.array([-np.sin(yaw), np.cos(yaw), 0.0])
+            self.meshes["lamp_glow"].quad(
+                head - d * 0.28 + side * 0.13 - np.array([0, 0, 0.11]), d, -side, 0.56, 0.26
             )
             self.collide_cylinder("pole", f"lamp {k}", x, y, 0.15, 3.0)
         for k, (x, y, yaw, kind) in enumerate(town.signs):
@@ -592,6 +637,8 @@ class _SceneBuilder:
             sky_texture_id=model.texture("sky").id,
             sun_light_id=model.light("sun").id,
             headlight_ids=(model.light("headlight_left").id, model.light("headlight_right").id),
+            night_geom_ids=tuple(model.geom(f"vis_{name}").id for name in NIGHT_MESHES),
+            window_texture_id=model.texture("windows_lit").id,
             ego_qpos_adr=qadr("ego"),
             car_qpos_adr=tuple(qadr(f"traffic_car{k}") for k in range(self.options.max_cars)),
             pedestrian_qpos_adr=tuple(

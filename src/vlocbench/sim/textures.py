@@ -52,6 +52,8 @@ class FacadeTile:
     width_m: float
     height_m: float
     variants: int = 1
+    # the window of every cell as shares of the cell: left, top, right, bottom (from its top-left)
+    window: tuple[float, float, float, float] | None = None
 
 
 FACADE_VARIANTS = 12  # window cells per facade style; every wall draws its own sequence of them
@@ -69,6 +71,19 @@ class _FacadeStyle:
     glass: NDArray
     balconies: bool
     shutter_color: NDArray | None
+
+
+LIT_WINDOW_RGB = (255, 217, 153)  # a warm interior light
+LIT_WINDOW_TEXELS = 256
+
+
+def lit_windows(share: float) -> Image:
+    """The lit windows' texture, (4, LIT_WINDOW_TEXELS, 3): a window whose rank (its texture
+    coordinate u, uniform in [0, 1)) is below ``share`` is lit, the others are black (unlit glass
+    at night)."""
+    image = np.zeros((4, LIT_WINDOW_TEXELS, 3), np.uint8)
+    image[:, : round(share * LIT_WINDOW_TEXELS)] = LIT_WINDOW_RGB
+    return image
 
 
 def facade(
@@ -108,7 +123,9 @@ def facade(
     shutter_color = rng.uniform(40, 200, 3) if family in (0, 1) and rng.random() < 0.4 else None
     look = _FacadeStyle(family, (h, w), base, window, frame, glass, balconies, shutter_color)
     cells = [_facade_cell(look, rng) for _ in range(variants)]
-    return FacadeTile(atlas(cells, variants), bay_m, floor_height_m, variants)
+    x0, y0, x1, y1 = window
+    share = (x0 / w, y0 / h, x1 / w, y1 / h)
+    return FacadeTile(atlas(cells, variants), bay_m, floor_height_m, variants, share)
 
 
 def _facade_cell(look: _FacadeStyle, rng: np.random.Generator) -> Image:
