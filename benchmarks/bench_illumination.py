@@ -3,7 +3,7 @@
     python benchmarks/bench_illumination.py [--town town10] [--method sift] [--k 0,2,4,6,8,10]
                                             [--queries 60] [--max-gain 512] [--shot-noise 0.02]
                                             [--read-noise 0.02] [--retrieval map|pose-prior]
-                                            [--experiment FILE]
+                                            [--experiment FILE] [--shadows]
 
 Renders the gallery camera at ``--queries`` poses spread along the route (half-way between gallery
 images), at each illumination level k, localizes each with the method's map (built once under
@@ -15,7 +15,8 @@ that recall falls with k as the paper's does.
 ``--retrieval pose-prior`` retrieves the map images nearest to the true pose instead of asking the
 map's retrieval: the local features alone, to tell their misses from the retrieval's.
 ``--experiment FILE`` takes ``--town`` and ``--method`` with their settings (gallery, mapping,
-localizer) from an experiment, so the maps are that experiment's.
+localizer) from an experiment, so the maps are that experiment's. ``--shadows``: the sun casts
+shadows in the gallery (its own gallery and maps) and in the queries.
 """
 
 from __future__ import annotations
@@ -33,6 +34,7 @@ from vlocbench.bench.paper import paper_results
 from vlocbench.bench.runner import prepare_maps
 from vlocbench.bench.towns import route_named, town_named
 from vlocbench.bench.visual import VisualLocalizer
+from vlocbench.config import load_yaml
 from vlocbench.geometry import planar_pose, pose_error
 from vlocbench.loc.localizer import RETRIEVAL_SOURCES
 from vlocbench.sim import Conditions, Exposure, Illumination, Simulator
@@ -56,19 +58,21 @@ def main() -> None:
         type=Path,
         help="take --town and --method with their settings from this file",
     )
+    ap.add_argument("--shadows", action="store_true", help="the sun's shadows, gallery too")
     args = ap.parse_args()
     if args.experiment:  # its gallery, mapping and method settings: the maps it built
-        plan = load_experiment(args.experiment).only([args.town], [args.method])
+        source = {"name": args.experiment.stem, **load_yaml(args.experiment)}
     else:
-        plan = load_experiment(
-            {
-                "name": "bench_illumination",
-                "towns": [args.town],
-                "methods": [args.method],
-                "failure": False,
-                "baseline": False,
-            }
-        )
+        source = {
+            "name": "bench_illumination",
+            "towns": [args.town],
+            "methods": [args.method],
+            "failure": False,
+            "baseline": False,
+        }
+    if args.shadows:
+        source.setdefault("gallery", {}).setdefault("conditions", {})["shadows"] = True
+    plan = load_experiment(source).only([args.town], [args.method])
     map_dir = prepare_maps(plan, progress=True)[(args.town, args.method)]
     town, route = town_named(args.town), route_named(args.town)
     camera = dataclasses.replace(plan.spec.gallery.camera, name="query")
@@ -86,7 +90,8 @@ def main() -> None:
     paper = paper_results().tables["illumination"]
     t1_paper = {m: dict(zip(paper.recall_levels, v)) for m, v in paper.recall_t1[args.town].items()}
     print(
-        f"{args.town}, {args.method}, {args.queries} queries, retrieval {args.retrieval}; {exposure}"
+        f"{args.town}, {args.method}, {args.queries} queries, retrieval {args.retrieval}; "
+        f"{exposure}; shadows {args.shadows}"
     )
     # gain: the sensor's; exposure: the share of the metered exposure it reached (1: none short)
     # answered: a pose returned; wrong: answered beyond (5 m, 10 deg); R@5: one of the retrieval's
@@ -100,7 +105,9 @@ def main() -> None:
     sim = Simulator(town)
     try:
         for k in (float(v) for v in args.k.split(",")):
-            sim.set_conditions(Conditions(illumination=Illumination(k=k), exposure=exposure))
+            sim.set_conditions(
+                Conditions(illumination=Illumination(k=k), exposure=exposure, shadows=args.shadows)
+            )
             pos, rot, ranked, seconds = [], [], [], []
             for (x, y), h in zip(xy, yaws):
                 sim.teleport(float(x), float(y), float(h))

@@ -3,7 +3,8 @@
 Prints medians of several runs after a warm-up. Targets (issues 2 and 14, this 2-core CPU):
 800x600 render <= 40 ms by day, vehicle step + collision <= 1 ms, town scene build <= 5 s. Renders
 are timed with the default camera (4x multisampling) and, by day and at night, with
-``Camera(antialias=False)``.
+``Camera(antialias=False)``; at night k = 8 and 10 the street lamps and lit windows are on (the
+default ``StreetLights``); ``shadows``: the sun casts shadows (``Conditions(shadows=True)``).
 """
 
 from __future__ import annotations
@@ -14,7 +15,15 @@ import time
 
 import numpy as np
 
-from vlocbench.sim import Conditions, Control, Illumination, Simulator, Weather, gallery_camera
+from vlocbench.sim import (
+    Conditions,
+    Control,
+    Illumination,
+    Simulator,
+    StreetLights,
+    Weather,
+    gallery_camera,
+)
 from vlocbench.sim.scene import build_scene
 from vlocbench.sim.town import generate_town, load_town_spec
 
@@ -38,6 +47,7 @@ def main() -> None:
         step_ms = 1000 * timed(lambda: sim.step(Control(throttle=0.2)), 2000)  # noqa: B023
         aa = gallery_camera()
         no_aa = dataclasses.replace(aa, antialias=False)
+        unlit = StreetLights("off")
         waypoints = np.linspace(5, len(town.route.waypoints_xy) - 5, 20).astype(int)
         print(
             f"{name}: scene build (generate + compile) {build_s:.2f} s; step + collision {step_ms:.3f} ms"
@@ -45,6 +55,10 @@ def main() -> None:
         for label, cond, cam in (
             ("day", Conditions(), aa),
             ("night k=8", Conditions(illumination=Illumination(k=8)), aa),
+            ("k=10", Conditions(illumination=Illumination(k=10)), aa),
+            ("k=10, unlit", Conditions(illumination=Illumination(k=10), street_lights=unlit), aa),
+            ("day, shadows", Conditions(shadows=True), aa),
+            ("k=4, shadows", Conditions(illumination=Illumination(k=4), shadows=True), aa),
             ("fog 30 m", Conditions(weather=Weather(fog_visual_range_m=30)), aa),
             ("rain", Conditions(weather=Weather(rain=0.7)), aa),
             ("day, no AA", Conditions(), no_aa),
@@ -57,7 +71,7 @@ def main() -> None:
                 sim.teleport(float(x), float(y), float(town.route.yaw_rad[idx]))
                 frames.append(1000 * timed(lambda: sim.render([cam]), 3))  # noqa: B023
             print(
-                f"  render 800x600 {label:11s}: median {statistics.median(frames):5.1f} ms (20 places x 3)"
+                f"  render 800x600 {label:12s}: median {statistics.median(frames):5.1f} ms (20 places x 3)"
             )
         sim.close()
 

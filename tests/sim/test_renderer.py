@@ -202,6 +202,21 @@ def test_street_lights_bad_input_names_the_field():
         StreetLights(lamp_illuminance=-1.0)
 
 
+def test_sun_shadows_darken_what_the_sun_cannot_reach_and_keep_the_skylight(small_sim):
+    sun = Illumination(k=2)
+    lit = gray(render(small_sim, Conditions(illumination=sun)))
+    shaded = gray(render(small_sim, Conditions(illumination=sun, shadows=True)))
+    darker = lit - shaded
+    in_shadow = darker > 10
+    assert in_shadow.mean() > 0.1  # the facade across the street and the pavement before it
+    assert (darker < -3).mean() == 0  # a shadow never brightens
+    # the sky still lights the shade: about half of the sunlit brightness, not black
+    assert 0.4 < (shaded[in_shadow] / lit[in_shadow]).mean() < 0.7
+    assert np.array_equal(gray(render(small_sim, Conditions(illumination=sun))), lit)
+    with pytest.raises(ConfigError, match="shadows"):
+        Conditions(shadows="yes")
+
+
 def test_projection_matches_the_render(small_sim):
     camera = Camera(
         "odd",

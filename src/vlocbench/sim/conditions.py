@@ -195,7 +195,8 @@ class Exposure:
     vlocbench's earlier night, a bright image paid for in shot noise (docs/fidelity.md)."""
 
     mode: Literal["auto", "fixed"] = "auto"
-    max_gain: float = 96.0
+    # 7 stops: fitted on town01's SIFT T1 recall at k = 8 (docs/fidelity.md, "Calibration")
+    max_gain: float = 128.0
     shot_noise: float = 0.0
     read_noise: float = 0.0
 
@@ -216,7 +217,15 @@ class Conditions:
     headlights: Headlights = field(default_factory=Headlights)
     exposure: Exposure = field(default_factory=Exposure)
     street_lights: StreetLights = field(default_factory=StreetLights)
+    # the sun's shadows (CARLA draws them; off by default here for their render cost: about
+    # 2-3x a frame's time, docs/fidelity.md); lamps and headlights cast none
+    shadows: bool = False
 
     def __post_init__(self) -> None:
         if self.season not in SEASONS:
             raise UnknownNameError("season", str(self.season), SEASONS)
+        require(
+            isinstance(self.shadows, bool),
+            "shadows",
+            f"must be true or false, got {self.shadows!r}",
+        )

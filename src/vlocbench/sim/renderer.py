@@ -45,7 +45,13 @@ ANTIALIAS_SAMPLES = 4  # MuJoCo's default multisampling of offscreen images
 # MuJoCo's classic renderer draws with OpenGL's fixed-function lights: at most 8 in a frame
 # (measured: a 9th and later lights of the scene add nothing)
 MAX_FRAME_LIGHTS = 8
-LAMP_AIM_AHEAD_M = 15.0  # lamps are lit nearest first to this point ahead of the camera
+# lamps are lit nearest first to this point ahead of the camera, and the sun's shadows are
+# drawn around it
+VIEW_AIM_AHEAD_M = 15.0
+# half the side of the square the sun's shadow map covers (4096 texels: 3 cm each), and how far
+# back towards the sun its light is placed (the shadow map's depth starts there)
+SHADOW_HALF_WIDTH_M = 60.0
+SHADOW_LIGHT_BACK_M = 500.0
 LEAVES = {"summer": (0.33, 0.55, 0.22), "autumn": (0.85, 0.45, 0.12), "winter": (0.5, 0.5, 0.5)}
 
 
@@ -79,11 +85,8 @@ def fog_color(c: Conditions, brightness: float) -> NDArray:
 class Renderer:
     """Renders RGB images of ``scene`` from arbitrary camera poses under ``apply``-ed conditions."""
 
-    def __init__(
-        self, scene: TownScene, conditions: Conditions | None = None, shadows: bool = False
-    ) -> None:
+    def __init__(self, scene: TownScene, conditions: Conditions | None = None) -> None:
         self.scene = scene
-        self.shadows = shadows
         self.backend = select_backend()
         self._renderers: dict[tuple[int, int, int], mujoco.Renderer] = {}
         self.option = mujoco.MjvOption()
@@ -195,13 +198,15 @@ class Renderer:
     def _renderer(self, width: int, height: int, samples: int) -> mujoco.Renderer:
         key = (width, height, samples)
         if key not in self._renderers:
-            # the multisample count is read when a context is made: one context per count
-            self.scene.model.vis.quality.offsamples = samples
+            # the multisample count and the shadow map's extent are read when a context is
+            # made: one context per count
+            m = self.scene.model
+            m.vis.quality.offsamples = samples
+            m.vis.map.shadowclip = SHADOW_HALF_WIDTH_M / m.stat.extent
             try:
                 r = mujoco.Renderer(self.scene.model, height, width, max_geom=20000)
             except Exception as exc:  # MuJoCo raises plain errors for missing GL libraries
                 raise missing_libraries_error(self.backend, exc) from exc
-            r.scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = self.shadows
             r.scene.flags[mujoco.mjtRndFlag.mjRND_SKYBOX] = 1
             self._renderers[key] = r
             self._upload_texture(r, self.scene.sky_texture_id)
@@ -259,8 +264,12 @@ class Renderer:
             cam.frustum_bottom, cam.frustum_top = -half_h, half_h
             cam.frustum_near, cam.frustum_far = NEAR_M, FAR_M
             cam.orthographic = 0
+        aim = pos + VIEW_AIM_AHEAD_M * _horizontal(rot[:, 2])
+        r.scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = self.conditions.shadows
+        if self.conditions.shadows:
+            self._cast_sun_shadows(r.scene, aim)
         if self.street_lights_on:
-            self._add_lamps(r.scene, pos + LAMP_AIM_AHEAD_M * _horizontal(rot[:, 2]))
+            self._add_lamps(r.scene, aim)
         if markers_world is not None:
             self._add_markers(r.scene, markers_world, marker_radius_m, (1.0, 0.0, 0.0))
         self._set_fog(r)
@@ -273,6 +282,22 @@ class Renderer:
         return sensor_noise(
             image, self.gain, e.shot_noise, e.read_noise, np.random.default_rng(seed + 1)
         )
+
+    def _cast_sun_shadows(self, scene: mujoco.MjvScene, aim_world: NDArray[np.float64]) -> None:
+        """The sun casts shadows in a square around ``aim_world`` (3,). MuJoCo draws a
+        shadow-casting light in a pass of its own, added where the light is not blocked, ambient
+        included: the sky's ambient light moves to a light that casts none, or shadows go black."""
+        lights = scene.lights[: scene.nlight]
+        sun = next(light for light in lights if light.id == self.scene.sun_light_id)
+        sun.castshadow = 1
+        sun.pos[:] = aim_world - SHADOW_LIGHT_BACK_M * np.asarray(sun.dir)
+        sky = scene.lights[scene.nlight]
+        sky.id, sky.type, sky.headlight, sky.castshadow = -1, sun.type, 0, 0
+        sky.dir[:] = [0.0, 0.0, -1.0]
+        sky.diffuse[:] = sky.specular[:] = 0.0
+        sky.ambient[:] = sun.ambient
+        sun.ambient[:] = 0.0
+        scene.nlight += 1
 
     def _add_lamps(self, scene: mujoco.MjvScene, aim_world: NDArray[np.float64]) -> None:
         """The street lamps nearest to ``aim_world`` (3,), as many as the frame has lights left:

@@ -52,14 +52,12 @@ class Simulator:
         conditions: Conditions | None = None,
         vehicle: VehicleParams | None = None,
         dt_s: float = 0.05,
-        shadows: bool = False,
     ) -> None:
         require(0 < dt_s <= 0.5, "dt_s", f"must be in (0, 0.5] s, got {dt_s}")
         self.town = town
         self.conditions = conditions or Conditions()
         self.params = vehicle or VehicleParams()
         self.dt_s = dt_s
-        self.shadows = shadows
         traffic = self.conditions.traffic
         self.scene: TownScene = build_scene(
             town, SceneOptions(max_cars=traffic.cars, max_pedestrians=traffic.pedestrians)
@@ -75,7 +73,7 @@ class Simulator:
     @property
     def renderer(self) -> Renderer:
         if self._renderer is None:
-            self._renderer = Renderer(self.scene, self.conditions, shadows=self.shadows)
+            self._renderer = Renderer(self.scene, self.conditions)
         return self._renderer
 
     def set_conditions(self, conditions: Conditions) -> None:
