@@ -5,11 +5,6 @@ import pytest
 from vlocbench.bench.experiment import load_experiment, resolve
 from vlocbench.errors import ConfigError, UnknownNameError
 
-MAPS = {
-    ("town10", "sift-vlad"): "/cache/maps/g1/sift-vlad-1",
-    ("town10", "orb"): "/cache/maps/g1/o",
-}
-
 
 def _spec(**overrides):
     data = {"name": "t", "towns": ["town10"], "methods": ["sift-vlad"], "repetitions": 2}
@@ -55,7 +50,7 @@ def test_query_cameras_and_rigs_start_from_the_gallery_camera():
 def test_expansion_counts_and_keys():
     spec = _spec(methods=["sift-vlad", {"name": "orb", "features": "orb-teblid", "matcher": "nn-hamming",
                                          "retrieval": "vlad"}], sweep={"illumination.k": [0, 6]})  # fmt: skip
-    tasks = spec.tasks(MAPS)
+    tasks = spec.tasks()
     kinds = [t.kind for t in tasks]
     # per method and setup: 1 recall + 2 failure; the baseline renders nothing, so k does not
     # change it: one set of baselines serves both setups, of at least 10 seeds
@@ -63,35 +58,57 @@ def test_expansion_counts_and_keys():
         kinds.count("recall") == 4 and kinds.count("failure") == 8 and kinds.count("baseline") == 10
     )
     assert sorted(t.episode.seed for t in tasks if t.kind == "baseline") == list(range(10))
-    few = _spec(baseline_repetitions=1, recall=False, failure=False).tasks(MAPS)
+    few = _spec(baseline_repetitions=1, recall=False, failure=False).tasks()
     assert len(few) == 2  # never fewer than the methods' repetitions
     assert len({t.key for t in tasks}) == len(tasks)
     assert {t.episode.mode for t in tasks if t.kind == "recall"} == {"ground_truth"}
     assert sorted({t.episode.seed for t in tasks if t.kind == "failure"}) == [0, 1]
     # the same spec gives the same keys; any change to what determines a result changes them
-    assert [t.key for t in spec.tasks(MAPS)] == [t.key for t in tasks]
-    other = resolve(dataclasses.replace(spec.spec, seed=50)).tasks(MAPS)
+    assert [t.key for t in spec.tasks()] == [t.key for t in tasks]
+    other = resolve(dataclasses.replace(spec.spec, seed=50)).tasks()
     assert not {t.key for t in other} & {t.key for t in tasks}
     latency = _spec(methods=["sift-vlad"], episode={"latency": {"mode": "none"}})
     base = _spec(methods=["sift-vlad"])
-    assert not {t.key for t in latency.tasks(MAPS)} & {t.key for t in base.tasks(MAPS)}
+    assert not {t.key for t in latency.tasks()} & {t.key for t in base.tasks()}
     # traffic changes what the baseline drives through: then setups need their own baselines
     traffic = _spec(sweep={"traffic.cars": [0, 5]}, recall=False, failure=False)
-    assert len(traffic.tasks({})) == 20
+    assert len(traffic.tasks()) == 20
+
+
+def _method_keys(plan):
+    return {t.key for t in plan.tasks() if t.method is not None}
+
+
+def test_keys_name_what_makes_the_maps_not_where_they_lie():
+    plan = _spec()
+    # no map is needed to list the episodes; the runner binds each to its folder afterwards
+    maps = {("town10", "sift-vlad"): "/cache/maps/town10-g-c/sift-vlad-1"}
+    bound = [t.on_maps(maps) for t in plan.tasks()]
+    assert {t.map_dir for t in bound if t.kind != "baseline"} == {maps[("town10", "sift-vlad")]}
+    assert {t.map_dir for t in bound if t.kind == "baseline"} == {None}
+    assert [t.key for t in bound] == [t.key for t in plan.tasks()]
+    assert _method_keys(_spec(cache="/elsewhere", output="/other")) == _method_keys(plan)
+    # the gallery's drive and the mapping settings make other maps: other episodes
+    assert not _method_keys(_spec(gallery={"spacing_m": 3.0})) & _method_keys(plan)
+    assert not _method_keys(_spec(mapping={"num_pairs": 10})) & _method_keys(plan)
+    # the baseline renders nothing: no gallery or map of its own
+    baselines = {t.key for t in plan.tasks() if t.kind == "baseline"}
+    assert baselines == {
+        t.key for t in _spec(gallery={"spacing_m": 3.0}).tasks() if t.kind == "baseline"
+    }
 
 
 def test_part_of_a_plan_keeps_its_episode_keys():
-    maps = {**MAPS, ("town01", "sift-vlad"): "/cache/maps/g2/s", ("town01", "orb"): "/c/g2/o"}
     whole = _spec(towns=["town01", "town10"], sweep={"illumination.k": [0, 6]},
                   methods=["sift-vlad", {"name": "orb", "features": "orb-teblid",
                                          "matcher": "nn-hamming", "retrieval": "vlad"}])  # fmt: skip
     part = whole.only(towns=["town10"], methods=["orb"])
     assert part.spec.towns == ("town10",) and [m.name for m in part.spec.methods] == ["orb"]
-    keys = {t.key: t for t in whole.tasks(maps)}
-    tasks = part.tasks(maps)
+    keys = {t.key: t for t in whole.tasks()}
+    tasks = part.tasks()
     assert tasks and all(t.key in keys and t.town == "town10" for t in tasks)
     assert {t.method.name for t in tasks if t.method} == {"orb"}
-    assert whole.only().tasks(maps) == whole.tasks(maps)
+    assert whole.only().tasks() == whole.tasks()
     with pytest.raises(UnknownNameError, match="valid: orb, sift-vlad"):
         whole.only(methods=["sift"])
     with pytest.raises(UnknownNameError, match="unknown town 'town02'; valid: town01, town10"):
@@ -103,7 +120,7 @@ def test_episode_settings_sweep_as_setups():
     assert [s.episode.ekf.late_measurements for s in plan.setups] == ["current", "replay"]
     assert plan.setups[1].label == "episode.ekf.late_measurements=replay"
     assert plan.axis == ("episode.ekf.late_measurements",)
-    tasks = plan.tasks(MAPS)
+    tasks = plan.tasks()
     keys = [{t.key for t in tasks if t.setup == s} for s in plan.setups]
     assert not keys[0] & keys[1]  # the baseline too: its EKF is part of what it drives with
     assert {t.episode.ekf.late_measurements for t in tasks if t.setup == plan.setups[1]} == {
@@ -111,7 +128,7 @@ def test_episode_settings_sweep_as_setups():
     }
     # a fixed value equal to the default changes no key
     fixed = _spec(sweep={"episode.ekf.late_measurements": "current"})
-    assert {t.key for t in fixed.tasks(MAPS)} == {t.key for t in _spec().tasks(MAPS)}
+    assert {t.key for t in fixed.tasks()} == {t.key for t in _spec().tasks()}
     with pytest.raises(ConfigError, match=r"sweep\.episode\.seed: is set per episode"):
         _spec(sweep={"episode.seed": [1, 2]})
     with pytest.raises(UnknownNameError, match="valid: current, replay"):
@@ -182,10 +199,9 @@ def test_episode_keys_are_stable():
     import hashlib
 
     spec = load_experiment("experiments/paper/illumination_reduced.yaml")
-    maps = {(t, m.name): f"/m/{t}/{m.name}" for t in spec.spec.towns for m in spec.spec.methods}
-    keys = sorted(t.key for t in spec.tasks(maps))
+    keys = sorted(t.key for t in spec.tasks())
     assert len(keys) == 116
-    assert hashlib.sha1(" ".join(keys).encode()).hexdigest()[:12] == "b474bda6a2ce"
+    assert hashlib.sha1(" ".join(keys).encode()).hexdigest()[:12] == "a009b01d3842"
 
 
 def test_a_ros_node_is_a_method_without_a_map():
@@ -195,11 +211,12 @@ def test_a_ros_node_is_a_method_without_a_map():
     )  # fmt: skip
     node = plan.spec.methods[1]
     assert not node.needs_map and node.localizer.ros.image_topic == "cam"
-    tasks = plan.tasks({("town10", "sift-vlad"): "/cache/maps/g1/sift-vlad-1"})  # none for it
+    maps = {("town10", "sift-vlad"): "/cache/maps/g1/sift-vlad-1"}  # none for the node
+    tasks = [t.on_maps(maps) for t in plan.tasks()]
     assert {t.map_dir for t in tasks if t.method_name == "my-node"} == {None}
     # an option added later changes no key of the methods that do not use it
     assert {t.key for t in tasks if t.method_name == "sift-vlad"} <= {
-        t.key for t in _spec().tasks(MAPS)
+        t.key for t in _spec().tasks()
     }
     with pytest.raises(ConfigError, match=r"ros\.timeout_s: must be > 0"):
         _spec(methods=[{"name": "n", "localizer": {"ros": {"timeout_s": 0}}}])

@@ -24,7 +24,7 @@ from vlocbench.loc.mapping import MAP_FILE
 def _fake_tasks():
     spec = load_experiment({"name": "fake", "towns": ["town10"], "methods": ["sift-vlad"],
                             "sweep": {"illumination.k": [0, 6]}, "repetitions": 2})  # fmt: skip
-    return spec.tasks({("town10", "sift-vlad"): "/nowhere/g/m"})  # 2 x (1 + 2) + 10 = 16
+    return spec.tasks()  # 2 x (1 + 2) + 10 = 16
 
 
 @pytest.fixture
@@ -197,7 +197,7 @@ def test_a_grouped_sweep_whose_keys_are_not_sorted_reports_every_cell(tmp_path):
     levels = [{"fog_visual_range_m": v, "rain": 0.8, "overcast": 0.8} for v in (90, 30)]
     spec = load_experiment({"name": "wx", "towns": ["town10"], "methods": ["sift-vlad"],
                             "repetitions": 1, "sweep": {"weather": levels}})  # fmt: skip
-    tasks = spec.tasks({("town10", "sift-vlad"): "/nowhere/g/m"})
+    tasks = spec.tasks()
     with ResultStore(tmp_path, "wx") as store:
         store.start_run(spec.spec.spec_hash, to_dict(spec), [t.key for t in tasks])
         execute(tasks, store, workers=1, runner=run_fake, progress=False)
@@ -270,6 +270,31 @@ def test_experiment_runs_end_to_end_and_resumes(tiny):
             "FROM episodes ORDER BY key"
         ).fetchall()
         assert {k for k, _ in kinds} == {"recall", "failure", "baseline"}
+
+
+def test_episodes_driven_on_another_capture_of_the_gallery_are_not_mixed_in(tiny, tmp_path):
+    """Keys name the gallery by what makes it; its content is checked: a store whose episodes
+    were driven on a gallery with another index stops the run before any episode."""
+    import shutil
+
+    from vlocbench.bench.store import StoreError
+
+    root, _ = tiny
+    out = tmp_path / "out"
+    shutil.copytree(root / "out", out)
+    with sqlite3.connect(out / DB_FILE) as db:
+        [(key, map_dir)] = db.execute(
+            "SELECT key, json_extract(config, '$.map_dir') FROM episodes WHERE kind = 'recall'"
+            " LIMIT 1"
+        ).fetchall()
+        moved = str(Path(map_dir).parent.with_name("small-0123456789-fedcba9876") / "sift-vlad")
+        db.execute(
+            "UPDATE episodes SET config = json_set(config, '$.map_dir', ?) WHERE key = ?",
+            (moved, key),
+        )
+    plan = load_experiment(root / "tiny.yaml").with_output(out)
+    with pytest.raises(StoreError, match=f"episode {key} .* captured again with other content"):
+        run_experiment(plan, progress=False)
 
 
 def test_galleries_and_maps_made_side_by_side_equal_those_made_in_turn(tiny, tmp_path):
@@ -514,7 +539,7 @@ def _run_fake_plans(root, *plans):
     """Run ``plans`` in turn into the store at ``root`` as the runner would."""
     with ResultStore(root, "ill") as store:
         for plan in plans:
-            tasks = plan.tasks(_fake_maps(plan))
+            tasks = [t.on_maps(_fake_maps(plan)) for t in plan.tasks()]
             store.start_run(plan.spec.spec_hash, to_dict(plan), [t.key for t in tasks])
             todo = [t for t in tasks if t.key not in store.done_keys()]
             execute(todo, store, workers=1, runner=run_fake, progress=False)
@@ -542,6 +567,23 @@ def test_episodes_another_sweep_ran_first_count_under_this_plans_setups(tmp_path
         assert cell is not None and cell.failure is not None and cell.recall is not None, label
 
 
+def test_an_old_runs_report_shows_its_episodes_where_they_were_stored(tmp_path, monkeypatch):
+    """A run stored by an earlier EPISODE_VERSION: its keys are none of the plan's now, yet its
+    report shows every cell, the baseline under every setup it served."""
+    import vlocbench.bench.experiment as experiment
+
+    _run_fake_plans(tmp_path, load_experiment({**_ILL, "sweep": {"illumination.k": [0, 6]}}))
+    monkeypatch.setattr(experiment, "EPISODE_VERSION", experiment.EPISODE_VERSION + 1)
+    stored, rows = read_latest_run(tmp_path)
+    plan = plan_from_stored(stored)
+    assert not {t.key for t in plan.tasks()} & {r.key for r in rows}
+    summary = summarize(plan, rows)
+    for label in ("illumination.k=0", "illumination.k=6"):
+        for method in ("sift-vlad", "odometry"):
+            cell = summary.cell("town10", method, label)
+            assert cell is not None and cell.failure is not None, (method, label)
+
+
 def test_a_sweep_run_in_parts_is_reported_whole(tmp_path, capsys):
     """A sweep run a level at a time (as on a small machine): the latest run's report shows its
     level, the experiment's report every level; episodes from another gallery do not count."""
@@ -558,7 +600,7 @@ def test_a_sweep_run_in_parts_is_reported_whole(tmp_path, capsys):
 
     plan = load_experiment(tmp_path / "ill.yaml")
     files = write_report(tmp_path, examples=False, plan=plan)
-    summary, planned = files.summary, plan.tasks(_fake_maps(plan))
+    summary, planned = files.summary, plan.tasks()
     assert summary.episodes == summary.planned == len(planned) == 5  # (recall, failure) x 2, base
     for label in ("illumination.k=0", "illumination.k=6"):
         cell = summary.cell("town10", "sift-vlad", label)

@@ -22,7 +22,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import itertools
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -175,15 +175,22 @@ class EpisodeTask:
     town: str
     setup: Setup
     method: MethodSpec | None
-    map_dir: str | None
     repetition: int
     episode: EpisodeConfig
     route_length_m: float = 0.0  # 0: the whole route
     key: str = ""
+    map_dir: str | None = None  # the method's map folder once prepared (not part of the key)
 
     @property
     def method_name(self) -> str:
         return self.method.name if self.method else "odometry"
+
+    def on_maps(self, map_dirs: Mapping[tuple[str, str], str]) -> EpisodeTask:
+        """This task with its map folder, ``map_dirs[(town, method name)]`` (as
+        :func:`~vlocbench.bench.runner.prepare_maps` returns them)."""
+        if self.method is None or not self.method.needs_map:
+            return self
+        return dataclasses.replace(self, map_dir=map_dirs[(self.town, self.method.name)])
 
 
 def _town_spec(name: str) -> TownSpec:
@@ -289,18 +296,23 @@ class ExperimentPlan:
         """The folder of a method's map, under its gallery's."""
         return map_name(method.name, method.conf, method.mapping or self.spec.mapping)
 
-    def tasks(self, map_dirs: Mapping[tuple[str, str], str]) -> list[EpisodeTask]:
-        """Every episode, keyed; ``map_dirs[(town, method name)]`` gives the maps. Baseline
-        episodes are listed once per distinct key (setups that differ only in appearance share
-        one)."""
+    def tasks(self) -> list[EpisodeTask]:
+        """Every episode of the plan, once per key: setups that differ only in appearance share
+        their baseline episodes. A task's map folder is bound later (:meth:`EpisodeTask.on_maps`):
+        keys depend on what determines the maps, not on where they lie."""
         tasks: dict[str, EpisodeTask] = {}
+        for task in self.episodes():
+            tasks.setdefault(task.key, task)
+        return list(tasks.values())
+
+    def episodes(self) -> Iterator[EpisodeTask]:
+        """Every (town, setup, job) of the plan, so that a baseline episode comes once for each
+        setup it serves: how the summary finds each setup's episodes in a store."""
         for town in self.spec.towns:
             town_dict = to_dict(_town_spec(town))
             for setup in self.setups:
                 for kind, method, rep in self._jobs():
-                    task = self._task(town, town_dict, setup, kind, method, rep, map_dirs)
-                    tasks.setdefault(task.key, task)
-        return list(tasks.values())
+                    yield self._task(town, town_dict, setup, kind, method, rep)
 
     def _jobs(self) -> list[tuple[EpisodeKind, MethodSpec | None, int]]:
         s = self.spec
@@ -316,19 +328,21 @@ class ExperimentPlan:
         return jobs
 
     def _task(self, town: str, town_dict: dict[str, Any], setup: Setup, kind: EpisodeKind,
-              method: MethodSpec | None, rep: int,
-              map_dirs: Mapping[tuple[str, str], str]) -> EpisodeTask:  # fmt: skip
+              method: MethodSpec | None, rep: int) -> EpisodeTask:  # fmt: skip
         config = dataclasses.replace(
             setup.episode,
             mode="ground_truth" if kind == "recall" else "navigate",
             seed=self.spec.seed + rep,
         )
-        map_dir = map_dirs[(town, method.name)] if method and method.needs_map else None
+        with_map = method is not None and method.needs_map
         world = (
-            {"traffic": setup.conditions.traffic}
+            baseline_drive(setup.conditions)
             if method is None  # the baseline renders nothing
             else {"conditions": setup.conditions, "cameras": setup.cameras}
         )
+        # what determines the result, nothing of where it lies: the gallery by its key (the
+        # town, the route, the drive, the scene version), the map by its name (the method's
+        # configuration and the mapping settings)
         key = config_hash(
             {
                 "kind": kind,
@@ -338,16 +352,26 @@ class ExperimentPlan:
                 "route_length_m": self.spec.route_length_m,
                 "world": world,
                 "method": method,
-                "map": Path(map_dir).name if map_dir else None,
-                "gallery": Path(map_dir).parent.name if map_dir else None,
+                "map": self.map_name(method) if with_map and method else None,
+                "gallery": self.gallery_key(town) if with_map else None,
                 "episode": config,
             },
             16,
         )
         return EpisodeTask(
-            kind=kind, town=town, setup=setup, method=method, map_dir=map_dir, repetition=rep,
-            episode=config, route_length_m=self.spec.route_length_m, key=key,
+            kind=kind, town=town, setup=setup, method=method, repetition=rep, episode=config,
+            route_length_m=self.spec.route_length_m, key=key,
         )  # fmt: skip
+
+
+# what an odometry-only drive depends on among a setup's conditions: the traffic alone (it renders
+# nothing), so setups that differ in appearance share its episodes (and its key)
+BASELINE_CONDITIONS = ("traffic",)
+
+
+def baseline_drive(conditions: Conditions) -> dict[str, Any]:
+    """The part of ``conditions`` an odometry-only drive depends on (:data:`BASELINE_CONDITIONS`)."""
+    return {name: getattr(conditions, name) for name in BASELINE_CONDITIONS}
 
 
 def plan_from_stored(data: dict[str, Any]) -> ExperimentPlan:

@@ -32,7 +32,7 @@ from vlocbench.bench.experiment import ExperimentPlan, plan_from_stored
 from vlocbench.bench.metrics import PLACE_RADII_M
 from vlocbench.bench.paper import FACTOR_OF_AXIS, PaperTable, paper_results, shape
 from vlocbench.bench.store import EpisodeRow, StoreError, read_episodes, read_latest_run
-from vlocbench.bench.summary import BASELINE, Cell, Summary, stored_tasks, summarize
+from vlocbench.bench.summary import BASELINE, Cell, Summary, summarize
 from vlocbench.bench.view import VIEW_DIR
 
 REPORT_DIR = "report"
@@ -675,7 +675,7 @@ def write_report(
         plan = plan_from_stored(stored)
     else:
         rows = read_episodes(output_dir)
-        keys = {t.key for t in stored_tasks(plan, rows)}
+        keys = {t.key for t in plan.tasks()}
         rows = [r for r in rows if r.key in keys]
         if not rows:
             raise StoreError(f"{output_dir} holds no episode of experiment {plan.name!r}")

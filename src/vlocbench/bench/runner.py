@@ -18,7 +18,7 @@ import threading
 import time
 import traceback
 from collections import deque
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -28,7 +28,7 @@ from vlocbench.bench.experiment import EpisodeTask, ExperimentPlan, MethodSpec
 from vlocbench.bench.gallery_capture import capture_gallery
 from vlocbench.bench.metrics import episode_metrics
 from vlocbench.bench.records import EpisodeResult
-from vlocbench.bench.store import EpisodeRow, ResultStore
+from vlocbench.bench.store import EpisodeRow, ResultStore, StoreError
 from vlocbench.bench.towns import route_named, town_named
 from vlocbench.config import to_dict
 from vlocbench.errors import ConfigError
@@ -587,7 +587,8 @@ def run_experiment(
     t0 = time.perf_counter()
     with ResultStore(plan.output_dir, plan.name) as store:
         maps = prepare_maps(plan, progress, workers if scheduler is None else 1)
-        tasks = plan.tasks(maps)
+        tasks = [t.on_maps(maps) for t in plan.tasks()]
+        _check_galleries(tasks, store)
         store.start_run(plan.spec.spec_hash, to_dict(plan), [t.key for t in tasks])
         done = store.done_keys()
         todo = [t for t in tasks if t.key not in done]
@@ -611,6 +612,22 @@ def run_experiment(
             store_s=e.store_s,
             slots=e.slots,
         )
+
+
+def _check_galleries(tasks: Sequence[EpisodeTask], store: ResultStore) -> None:
+    """A gallery's content is a cache check, not part of the episode keys: stored episodes driven
+    with maps of another capture of a gallery (its index differs: captured again, and otherwise)
+    are not mixed with episodes on the cached one."""
+    stored = store.stored_map_dirs()
+    for t in tasks:
+        was = stored.get(t.key)
+        if was and t.map_dir and Path(was).parent.name != Path(t.map_dir).parent.name:
+            raise StoreError(
+                f"{store.root}: episode {t.key} ({t.town}, {t.method_name}) was driven on the "
+                f"gallery {Path(was).parent.name}, while the cache holds "
+                f"{Path(t.map_dir).parent.name}: the gallery was captured again with other "
+                "content. Run into another output folder, or restore the cache it was driven with"
+            )
 
 
 def _order(tasks: Iterable[EpisodeTask]) -> list[EpisodeTask]:

@@ -277,6 +277,11 @@ class ResultStore:
         """Keys of the episodes finished without error."""
         return {k for (k,) in self._conn.execute("SELECT key FROM episodes WHERE status='ok'")}
 
+    def stored_map_dirs(self) -> dict[str, str]:
+        """The map folder each finished episode was driven with, by key (those with a map)."""
+        query = "SELECT key, json_extract(config, '$.map_dir') FROM episodes WHERE status='ok'"
+        return {k: m for k, m in self._conn.execute(query) if m}
+
     def episode_dir(self, key: str) -> Path:
         return self.root / EPISODES_DIR / key
 

@@ -8,16 +8,20 @@ share its key (the same traffic) share its cell.
 
 from __future__ import annotations
 
-import json
 from collections import defaultdict
 from collections.abc import Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from vlocbench.bench.experiment import EpisodeTask, ExperimentPlan, ExperimentSpec, Setup
+from vlocbench.bench.experiment import (
+    BASELINE_CONDITIONS,
+    ExperimentPlan,
+    ExperimentSpec,
+    Setup,
+    baseline_drive,
+)
 from vlocbench.bench.metrics import (
     FailureRate,
     Fragmentation,
@@ -91,11 +95,26 @@ def _mean(values: Sequence[float]) -> float:
     return float(np.mean(finite)) if finite else float("nan")
 
 
-def _baseline_drive(traffic: dict[str, Any], episode: dict[str, Any]) -> str:
-    """What an odometry-only drive depends on among a setup's settings: the traffic and the
-    episode config (its seed and mode are set per repetition)."""
-    settings = {k: v for k, v in episode.items() if k not in ("seed", "mode")}
-    return json.dumps([traffic, settings], sort_keys=True)
+def _stored_cells(plan: ExperimentPlan, row: EpisodeRow) -> list[tuple[str, str, str]]:
+    """The cells of a row that no episode of ``plan`` has: the setup it was stored for; a
+    baseline's every setup with its drive and episode settings (its seed and mode are set per
+    repetition)."""
+    town = row.config["town"]
+    if row.method != BASELINE:
+        return [(town, row.method, row.setup)]
+    conditions = row.config["setup"]["conditions"]
+    drive = {name: conditions.get(name) for name in BASELINE_CONDITIONS}
+    settings = _settings(row.config["episode"])
+    return [
+        (town, BASELINE, s.label)
+        for s in plan.setups
+        if to_dict(baseline_drive(s.conditions)) == drive
+        and _settings(to_dict(s.episode)) == settings
+    ]
+
+
+def _settings(episode: dict[str, Any]) -> dict[str, Any]:
+    return {k: v for k, v in episode.items() if k not in ("seed", "mode")}
 
 
 def _cell(key: tuple[str, str, str], group: list[EpisodeRow], errors: int) -> Cell:
@@ -130,71 +149,26 @@ def _cell(key: tuple[str, str, str], group: list[EpisodeRow], errors: int) -> Ce
     )
 
 
-class _MapDirs(dict):
-    """Map folders by (town, method name); a method without stored episodes gets a placeholder
-    (its keys then match no row)."""
-
-    def __missing__(self, key: tuple[str, str]) -> str:
-        return "/no-episodes"
-
-
-def stored_tasks(plan: ExperimentPlan, rows: Sequence[EpisodeRow]) -> list[EpisodeTask]:
-    """The tasks of ``plan`` that ``rows`` hold, whichever run (of this plan or another that
-    shares its episodes) ran them. A task's key names its map, so the plan's maps are found among
-    those the rows name: built from the plan's gallery (its folder; any content hash) with the
-    method's configuration. Where a gallery was captured again, its episodes under every copy
-    count."""
-    wanted = {
-        (town, m.name): (plan.gallery_folder(town), plan.map_name(m))
-        for town in plan.spec.towns
-        for m in plan.spec.methods
-        if m.needs_map
-    }
-    found: dict[tuple[str, str], list[str]] = defaultdict(list)
-    for r in rows:
-        map_dir, at = r.config.get("map_dir"), (r.config["town"], r.method)
-        if not map_dir or at not in wanted or map_dir in found[at]:
-            continue
-        gallery, name = wanted[at]
-        if Path(map_dir).name == name and Path(map_dir).parent.name.startswith(gallery + "-"):
-            found[at].append(map_dir)
-    keys = {r.key for r in rows}
-    tasks: dict[str, EpisodeTask] = {}
-    for i in range(max(map(len, found.values()), default=1)):  # a task depends on one map only
-        map_dirs = _MapDirs({at: dirs[min(i, len(dirs) - 1)] for at, dirs in found.items()})
-        tasks |= {t.key: t for t in plan.tasks(map_dirs) if t.key in keys}
-    return list(tasks.values())
-
-
-def _setup_labels(plan: ExperimentPlan, rows: Sequence[EpisodeRow]) -> dict[str, str]:
-    """Each episode key's setup label in *this* plan: an episode another experiment ran first
-    (same key, shared through the store) is stored under that experiment's label."""
-    return {t.key: t.setup.label for t in stored_tasks(plan, rows) if t.method is not None}
-
-
 def summarize(plan: ExperimentPlan, rows: Sequence[EpisodeRow]) -> Summary:
-    """Aggregate ``rows`` (one run's episodes) by town, method and setup."""
-    spec, the_setups = plan.spec, plan.setups
-    ok = [r for r in rows if r.status == "ok" and r.metrics is not None]
+    """Aggregate ``rows`` (one run's episodes, or a store's) by town, method and setup of
+    ``plan``. Rows are found by the keys of the plan's episodes, so an episode another experiment
+    stored first counts under this plan's setup; a row of none of them (stored by an earlier
+    EPISODE_VERSION, as when an old run's report is made again) counts where it was stored."""
+    cells_of: dict[str, list[tuple[str, str, str]]] = defaultdict(list)
+    for task in plan.episodes():
+        cell = (task.town, task.method_name, task.setup.label)
+        if cell not in cells_of[task.key]:
+            cells_of[task.key].append(cell)
     by: dict[tuple[str, str, str], list[EpisodeRow]] = defaultdict(list)
-    drive_of = {
-        s.label: _baseline_drive(to_dict(s.conditions.traffic), to_dict(s.episode))
-        for s in the_setups
-    }
-    label_of = _setup_labels(plan, rows)
-    for r in ok:
-        if r.method == BASELINE:  # a baseline serves every setup with its traffic and settings
-            drive = _baseline_drive(r.config["setup"]["conditions"]["traffic"], r.config["episode"])
-            for s in the_setups:
-                if drive_of[s.label] == drive:
-                    by[(r.config["town"], BASELINE, s.label)].append(r)
-        else:
-            by[(r.config["town"], r.method, label_of.get(r.key, r.setup))].append(r)
     errors_by: dict[tuple[str, str, str], int] = defaultdict(int)
     for r in rows:
-        if r.status != "ok":
-            errors_by[(r.config["town"], r.method, label_of.get(r.key, r.setup))] += 1
+        for cell in cells_of.get(r.key) or _stored_cells(plan, r):
+            if r.status == "ok" and r.metrics is not None:
+                by[cell].append(r)
+            elif r.status != "ok":
+                errors_by[cell] += 1
     cells = {key: _cell(key, group, errors_by.get(key, 0)) for key, group in by.items()}
+    spec = plan.spec
     methods = tuple(m.name for m in spec.methods) + ((BASELINE,) if spec.baseline else ())
     town_names = {t: t for t in spec.towns} | {r.config["town"]: r.town for r in rows}
     return Summary(
@@ -202,10 +176,10 @@ def summarize(plan: ExperimentPlan, rows: Sequence[EpisodeRow]) -> Summary:
         towns=spec.towns,
         town_names=town_names,
         methods=methods,
-        setups=the_setups,
+        setups=plan.setups,
         axis=plan.axis,
         cells=cells,
         errors=tuple(r for r in rows if r.status != "ok"),
         episodes=len(rows),
-        planned=len(plan.tasks(_MapDirs())),
+        planned=len(plan.tasks()),
     )
