@@ -107,6 +107,8 @@ def test_exit_codes_by_kind_of_error(capsys, tmp_path):
     assert exc.value.code == 2
     assert main(["render", "town10", "--k", "11", "-o", str(tmp_path / "x.png")]) == 1  # input
     assert "illumination.k: must be in [0, 10], got 11" in capsys.readouterr().err
+    assert main(["render", "town10", "--street-lights", "dusk", "-o", str(tmp_path / "x.png")]) == 1
+    assert "street_lights.mode" in capsys.readouterr().err
     busy = tmp_path / "busy"
     from vlocbench.bench.store import ResultStore
 

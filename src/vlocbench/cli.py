@@ -55,6 +55,7 @@ def _render(args: argparse.Namespace) -> int:
         Illumination,
         Intrinsics,
         Simulator,
+        StreetLights,
         Viewpoint,
         Weather,
     )
@@ -67,6 +68,8 @@ def _render(args: argparse.Namespace) -> int:
         season=args.season,
         viewpoint=Viewpoint(args.dz, args.pitch_down),
         headlights=Headlights(on=args.headlights),
+        street_lights=StreetLights(args.street_lights),
+        shadows=args.shadows,
     )
     camera = Camera(
         "cli",
@@ -426,6 +429,9 @@ def _add_town_verbs(sub: Any, shared: dict[str, argparse.ArgumentParser]) -> Non
     p.add_argument("--overcast", type=float, default=0.0, help="overcast in [0, 1]")
     p.add_argument("--season", default="summer", help="summer, autumn or winter")
     p.add_argument("--headlights", action="store_true", help="switch the headlights on")
+    p.add_argument("--street-lights", default="auto",
+                   help="the town's lamps and windows: auto (on at night), on or off")  # fmt: skip
+    p.add_argument("--shadows", action="store_true", help="the sun casts shadows (slower)")
     p.add_argument("--dz", type=float, default=0.0, help="camera height offset in metres")
     p.add_argument("--pitch-down", type=float, default=0.0, help="camera tilt down in degrees")
     p.add_argument("--yaw", type=float, default=-90.0, help="camera yaw in degrees (-90: right)")

@@ -188,14 +188,14 @@ class Exposure:
     opens up by at most ``max_gain`` (its exposure range) to keep the brightness of noon; beyond
     that range the image darkens through the camera's gamma (a dark image, as CARLA's at night,
     whose auto exposure spans only EV100 10-12 by default), with no sensor noise. ``fixed``: gain
-    1, so every dim scene is dark. ``max_gain`` is calibrated against the paper's SIFT recall at
-    each k (``benchmarks/bench_illumination.py``; README). Sensor noise, if wanted, grows with the
-    gain: photon shot noise (variance ``shot_noise`` x gain per grey level) and read noise
+    1, so every dim scene is dark. ``max_gain`` is fitted on the paper's SIFT recall at one
+    level (``benchmarks/bench_illumination.py``; docs/calibration.md). Sensor noise, if wanted,
+    grows with the gain: photon shot noise (variance ``shot_noise`` x gain per grey level) and read noise
     (``read_noise`` x gain grey levels); ``Exposure(max_gain=65536, shot_noise=0.03)`` is
     vlocbench's earlier night, a bright image paid for in shot noise (docs/fidelity.md)."""
 
     mode: Literal["auto", "fixed"] = "auto"
-    # 7 stops: fitted on town01's SIFT T1 recall at k = 8 (docs/fidelity.md, "Calibration")
+    # 7 stops: fitted on town01's SIFT T1 recall at k = 8 (docs/calibration.md)
     max_gain: float = 128.0
     shot_noise: float = 0.0
     read_noise: float = 0.0
@@ -217,8 +217,9 @@ class Conditions:
     headlights: Headlights = field(default_factory=Headlights)
     exposure: Exposure = field(default_factory=Exposure)
     street_lights: StreetLights = field(default_factory=StreetLights)
-    # the sun's shadows (CARLA draws them; off by default here for their render cost: about
-    # 2-3x a frame's time, docs/fidelity.md); lamps and headlights cast none
+    # the sun's shadows (CARLA draws them; off by default here for their render cost, 2-2.8x a
+    # frame's time, with no measured effect on recall: docs/calibration.md); lamps and headlights
+    # cast none
     shadows: bool = False
 
     def __post_init__(self) -> None:

@@ -15,10 +15,10 @@ The camera meters that light and opens up (longer exposure, then gain) by up to 
 where it reaches that; beyond its range it reaches only a share e < 1 of it, and its
 gamma-encoded output (display = linear^(1/2.2), as sRGB and CARLA's tone curve) is darker by
 e^(1/2.2): every light of the scene is scaled by it, so the 8-bit quantization comes once, last.
-The town's own lights (street lamps, lit windows) are set in the same display values. Sensor noise grows with the gain: photon
-shot noise (variance ``shot_noise * gain`` per grey level) and read noise (``read_noise * gain``).
-The camera's range is calibrated once, against the recall the paper measured at each k
-(``benchmarks/bench_illumination.py``); see the README.
+The town's own lights (street lamps, lit windows) are set in the same display values. Sensor
+noise grows with the gain: photon shot noise (variance ``shot_noise * gain`` per grey level) and
+read noise (``read_noise * gain``). The camera's range is fitted once, on the recall the paper
+measured at one level (``benchmarks/bench_illumination.py``; docs/calibration.md).
 """
 
 from __future__ import annotations
