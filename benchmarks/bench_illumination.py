@@ -121,7 +121,7 @@ def main() -> None:
                 pos.append(p)
                 rot.append(r)
                 ranked.append(e.retrieval_distances_m(truth))
-                stages = e.info.get("seconds", {})
+                stages = e.stage_s
                 seconds.append([e.compute_time_s, *(stages.get(s, 0.0) for s in STAGES)])
             errors = np.array(pos), np.array(rot)
             rec = recall(*errors)

@@ -33,12 +33,16 @@ class RenderOnly:
     """Renders the gallery camera at every query and localizes nothing: the cost of the images."""
 
     name = "render-only"
+    uses_ground_truth = False
 
     @property
     def cameras(self) -> Sequence[Camera]:
         return (gallery_camera(),)
 
     def reset(self, seed: int) -> None:
+        pass
+
+    def close(self) -> None:
         pass
 
     def localize(self, query: LocalizationQuery) -> PoseEstimate:

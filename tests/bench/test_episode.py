@@ -53,6 +53,9 @@ class Probe:
     def reset(self, seed):
         self.queries.clear()
 
+    def close(self):
+        pass
+
     def localize(self, query):
         self.queries.append(query)
         pose = query.true_world_from_vehicle

@@ -69,4 +69,4 @@ def test_a_failed_attempt_reports_its_stages(sift_map):
     black = Frame(CAMERA, np.zeros((i.height, i.width, 3), np.uint8), np.eye(4), 0.0)
     e = localizer.localize(LocalizationQuery(0.0, (black,), np.eye(4)))
     assert not e.success and e.reason
-    assert e.info["seconds"]["features"] > 0
+    assert e.stage_s["features"] > 0

@@ -190,9 +190,9 @@ def _record(p: _InFlight, fused: bool | None) -> LocalizationRecord:
         fused=fused,
         reason=e.reason,
         retrieval_distances_m=tuple(float(d) for d in e.retrieval_distances_m(p.truth)),
-        retrieved_images=tuple(str(n) for n in e.info.get("retrieved", ())),
+        retrieved_images=tuple(str(n) for n in e.retrieved),
         covariance=() if e.covariance is None else tuple(np.asarray(e.covariance, float).ravel()),
-        inliers=int(e.info.get("inliers", 0)) if e.success else 0,
+        inliers=int(e.inliers) if e.success else 0,
     )
 
 
@@ -260,15 +260,12 @@ class Episode:
         assert self.localizer is not None
         frames = tuple(self.sim.render(self.localizer.cameras)) if self.localizer.cameras else ()
         truth = state.world_from_vehicle()
-        gt = truth if getattr(self.localizer, "uses_ground_truth", False) else None
+        gt = truth if self.localizer.uses_ground_truth else None
         ekf_pose = self._ekf_pose()
         start = time.perf_counter()
         estimate = self.localizer.localize(LocalizationQuery(t, frames, planar_pose(*ekf_pose), gt))
         if estimate.compute_time_s == 0.0:
-            estimate = PoseEstimate(
-                estimate.success, estimate.world_from_vehicle, estimate.covariance,
-                time.perf_counter() - start, estimate.reason, estimate.info,
-            )  # fmt: skip
+            estimate = dataclasses.replace(estimate, compute_time_s=time.perf_counter() - start)
         lat = self.config.latency
         latency = {"none": 0.0, "fixed": lat.fixed_s, "measured": estimate.compute_time_s}[lat.mode]
         due_s = t + latency

@@ -6,7 +6,7 @@ methods, the EKF's estimate at that instant) and answers with the vehicle's pose
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol, runtime_checkable
 
@@ -38,33 +38,45 @@ class LocalizationQuery:
 class PoseEstimate:
     """A localizer's answer. On success ``world_from_vehicle`` is (4, 4); ``covariance`` (3, 3)
     over (x, y, yaw) or ``None`` for the EKF's default. On failure ``reason`` says why.
-    ``compute_time_s``: the method's own time (wall clock)."""
+    ``compute_time_s``: the method's own time (wall clock). The rest is what a method may report
+    of its attempt (a failure too), for the records and the reports; every field is optional."""
 
     success: bool
     world_from_vehicle: Array | None = None
     covariance: Array | None = None
     compute_time_s: float = 0.0
     reason: str = ""
-    info: dict[str, Any] = field(default_factory=dict)
+    inliers: int = 0  # PnP inliers of the answer (0: none, or not reported)
+    correspondences: int = 0  # 2D-3D correspondences PnP was given
+    camera: str = ""  # the camera whose pose answered, "rig" for one PnP over all of them
+    fallback: bool = False  # answered by the localizer's fallback (e.g. the best single image)
+    retrieved: tuple[str, ...] = ()  # the gallery images retrieved, best first, camera by camera
+    # (R, 3) where the vehicle would stand for each of the first camera's retrieved images
+    ranked_xyz_m: Array | None = None
+    stage_s: Mapping[str, float] = field(default_factory=dict)  # time per stage (features, ...)
 
     @classmethod
-    def failure(cls, reason: str, compute_time_s: float = 0.0,
-                info: dict[str, Any] | None = None) -> PoseEstimate:  # fmt: skip
-        return cls(False, compute_time_s=compute_time_s, reason=reason, info=info or {})
+    def failure(cls, reason: str, compute_time_s: float = 0.0, **attempt: Any) -> PoseEstimate:
+        """No pose; ``attempt``: any of the optional fields, as far as the method got."""
+        return cls(False, compute_time_s=compute_time_s, reason=reason, **attempt)
 
     def retrieval_distances_m(self, world_from_vehicle: Array) -> Array:
         """(R,) distances from the true vehicle pose (4, 4) to where the vehicle would stand for
-        each of the retrieval's best images (``info["ranked_xyz_m"]``), best first; (0,) for a
-        localizer without retrieval."""
-        ranked_xyz = np.asarray(self.info.get("ranked_xyz_m", np.zeros((0, 3))), np.float64)
-        return np.linalg.norm(ranked_xyz.reshape(-1, 3) - world_from_vehicle[:3, 3], axis=1)
+        each of the retrieval's best images (``ranked_xyz_m``), best first; (0,) for a localizer
+        without retrieval."""
+        if self.ranked_xyz_m is None:
+            return np.zeros(0)
+        ranked_xyz = np.asarray(self.ranked_xyz_m, np.float64).reshape(-1, 3)
+        return np.linalg.norm(ranked_xyz - world_from_vehicle[:3, 3], axis=1)
 
 
 @runtime_checkable
 class Localizer(Protocol):
-    """What the episode loop needs of a localization method."""
+    """What the episode loop needs of a localization method. ``uses_ground_truth``: its queries
+    carry the true pose (reference methods such as the oracle; a method under test says False)."""
 
     name: str
+    uses_ground_truth: bool
 
     @property
     def cameras(self) -> Sequence[Camera]:
@@ -76,6 +88,10 @@ class Localizer(Protocol):
         ...
 
     def localize(self, query: LocalizationQuery) -> PoseEstimate: ...
+
+    def close(self) -> None:
+        """Release what it holds (a map, a connection); the runner calls it when done."""
+        ...
 
 
 def planar_of(world_from_vehicle: Array) -> tuple[float, float, float]:
@@ -120,6 +136,9 @@ class OracleLocalizer:
 
     def reset(self, seed: int) -> None:
         self.rng = np.random.default_rng(seed)
+
+    def close(self) -> None:
+        """Holds nothing."""
 
     def localize(self, query: LocalizationQuery) -> PoseEstimate:
         c = self.config

@@ -122,7 +122,7 @@ def _localizer(task: EpisodeTask) -> Any:
     key = (task.map_dir, task.method.localizer, task.setup.cameras)
     if key not in _LOCALIZER:
         for old in _LOCALIZER.values():
-            getattr(old, "close", lambda: None)()
+            old.close()
         _LOCALIZER.clear()
         endpoint = task.method.localizer.ros
         if endpoint is not None:

@@ -47,6 +47,9 @@ class VisualLocalizer:
     def reset(self, seed: int) -> None:
         """Stateless, and its RANSAC is seeded by its config."""
 
+    def close(self) -> None:
+        """Its map is freed with it."""
+
     def localize(self, query: LocalizationQuery) -> PoseEstimate:
         """All cameras as one rig (the vehicle frame): a generalized PnP over their matches."""
         start = time.perf_counter()
@@ -64,17 +67,17 @@ class VisualLocalizer:
         ranked = result.cameras[0].ranked_world_from_cam @ invert_pose(first)
         attempt = {  # what a failure reports too
             "ranked_xyz_m": ranked[:, :3, 3],
-            "retrieved": [name for r in result.cameras for name in r.retrieved],
-            "seconds": result.seconds,
+            "retrieved": tuple(name for r in result.cameras for name in r.retrieved),
+            "stage_s": dict(result.seconds),
+            "correspondences": sum(r.num_correspondences for r in result.cameras),
         }
         if not result.success:
-            return PoseEstimate.failure(result.reason, elapsed, attempt)
+            return PoseEstimate.failure(result.reason, elapsed, **attempt)
         assert result.world_from_rig is not None
-        info = {
+        return PoseEstimate(
+            True, result.world_from_rig, None, elapsed, result.reason,
+            inliers=result.num_inliers,
+            camera="rig" if result.generalized else query.frames[result.camera].camera.name,
+            fallback=not result.generalized and result.cameras[result.camera].fallback,
             **attempt,
-            "camera": "rig" if result.generalized else query.frames[result.camera].camera.name,
-            "inliers": result.num_inliers,
-            "correspondences": sum(r.num_correspondences for r in result.cameras),
-            "fallback": not result.generalized and result.cameras[result.camera].fallback,
-        }
-        return PoseEstimate(True, result.world_from_rig, None, elapsed, result.reason, info)
+        )  # fmt: skip

@@ -120,8 +120,8 @@ class RosLocalizer:
         if key in self.poses:
             self._wait_for_inliers(key, deadline)
             msg = self.poses.pop(key)
-            info = {"inliers": self.inliers.pop(key)} if key in self.inliers else {}
-            return PoseEstimate(True, pose_from_msg(msg.pose.pose), None, elapsed, info=info)
+            inliers = self.inliers.pop(key, 0)
+            return PoseEstimate(True, pose_from_msg(msg.pose.pose), None, elapsed, inliers=inliers)
         return PoseEstimate.failure(self.failures.pop(key), elapsed)
 
     def _wait_for_inliers(self, key: str, deadline: float) -> None:
