@@ -27,14 +27,13 @@ from pathlib import Path
 
 import numpy as np
 
-from vlocbench.bench.experiment import load_experiment
+from vlocbench.bench.experiment import load_experiment, resolve
 from vlocbench.bench.localizer import LocalizationQuery
 from vlocbench.bench.metrics import confident_wrong, place_recall, recall
 from vlocbench.bench.paper import paper_results
 from vlocbench.bench.runner import prepare_maps
 from vlocbench.bench.towns import route_named, town_named
 from vlocbench.bench.visual import VisualLocalizer
-from vlocbench.config import load_yaml
 from vlocbench.geometry import planar_pose, pose_error
 from vlocbench.loc.localizer import RETRIEVAL_SOURCES
 from vlocbench.sim import Conditions, Exposure, Illumination, Simulator
@@ -61,18 +60,22 @@ def main() -> None:
     ap.add_argument("--shadows", action="store_true", help="the sun's shadows, gallery too")
     args = ap.parse_args()
     if args.experiment:  # its gallery, mapping and method settings: the maps it built
-        source = {"name": args.experiment.stem, **load_yaml(args.experiment)}
+        plan = load_experiment(args.experiment)
     else:
-        source = {
-            "name": "bench_illumination",
-            "towns": [args.town],
-            "methods": [args.method],
-            "failure": False,
-            "baseline": False,
-        }
-    if args.shadows:
-        source.setdefault("gallery", {}).setdefault("conditions", {})["shadows"] = True
-    plan = load_experiment(source).only([args.town], [args.method])
+        plan = load_experiment(
+            {
+                "name": "bench_illumination",
+                "towns": [args.town],
+                "methods": [args.method],
+                "failure": False,
+                "baseline": False,
+            }
+        )
+    plan = plan.only([args.town], [args.method])
+    if args.shadows:  # the gallery too: its own gallery and maps
+        g = plan.spec.gallery
+        shaded = dataclasses.replace(g, conditions=dataclasses.replace(g.conditions, shadows=True))
+        plan = resolve(dataclasses.replace(plan.spec, gallery=shaded))
     map_dir = prepare_maps(plan, progress=True)[(args.town, args.method)]
     town, route = town_named(args.town), route_named(args.town)
     camera = dataclasses.replace(plan.spec.gallery.camera, name="query")

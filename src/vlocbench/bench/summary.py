@@ -95,26 +95,27 @@ def _mean(values: Sequence[float]) -> float:
     return float(np.mean(finite)) if finite else float("nan")
 
 
-def _stored_cells(plan: ExperimentPlan, row: EpisodeRow) -> list[tuple[str, str, str]]:
+def _stored_cells(
+    plan: ExperimentPlan, drives: Sequence[tuple[str, dict[str, Any]]], row: EpisodeRow
+) -> list[tuple[str, str, str]]:
     """The cells of a row that no episode of ``plan`` has: the setup it was stored for; a
-    baseline's every setup with its drive and episode settings (its seed and mode are set per
-    repetition)."""
+    baseline's every setup whose drive (``drives``: label, :func:`_drive` of each setup) is its."""
     town = row.config["town"]
     if row.method != BASELINE:
         return [(town, row.method, row.setup)]
     conditions = row.config["setup"]["conditions"]
-    drive = {name: conditions.get(name) for name in BASELINE_CONDITIONS}
-    settings = _settings(row.config["episode"])
-    return [
-        (town, BASELINE, s.label)
-        for s in plan.setups
-        if to_dict(baseline_drive(s.conditions)) == drive
-        and _settings(to_dict(s.episode)) == settings
-    ]
+    drive = _drive({name: conditions.get(name) for name in BASELINE_CONDITIONS},
+                   row.config["episode"])  # fmt: skip
+    return [(town, BASELINE, label) for label, d in drives if d == drive]
 
 
-def _settings(episode: dict[str, Any]) -> dict[str, Any]:
-    return {k: v for k, v in episode.items() if k not in ("seed", "mode")}
+def _drive(world: dict[str, Any], episode: dict[str, Any]) -> dict[str, Any]:
+    """What an odometry-only drive depends on, as stored: its part of the conditions and the
+    episode settings (the seed and mode are set per repetition)."""
+    return {
+        "world": world,
+        "episode": {k: v for k, v in episode.items() if k not in ("seed", "mode")},
+    }
 
 
 def _cell(key: tuple[str, str, str], group: list[EpisodeRow], errors: int) -> Cell:
@@ -159,10 +160,14 @@ def summarize(plan: ExperimentPlan, rows: Sequence[EpisodeRow]) -> Summary:
         cell = (task.town, task.method_name, task.setup.label)
         if cell not in cells_of[task.key]:
             cells_of[task.key].append(cell)
+    drives = [
+        (s.label, _drive(to_dict(baseline_drive(s.conditions)), to_dict(s.episode)))
+        for s in plan.setups
+    ]
     by: dict[tuple[str, str, str], list[EpisodeRow]] = defaultdict(list)
     errors_by: dict[tuple[str, str, str], int] = defaultdict(int)
     for r in rows:
-        for cell in cells_of.get(r.key) or _stored_cells(plan, r):
+        for cell in cells_of.get(r.key) or _stored_cells(plan, drives, r):
             if r.status == "ok" and r.metrics is not None:
                 by[cell].append(r)
             elif r.status != "ok":

@@ -141,6 +141,7 @@ class Headlights:
 
 
 StreetLightMode = Literal["auto", "on", "off"]
+STREET_LIGHT_MODES: tuple[str, ...] = ("auto", "on", "off")
 
 
 @dataclass(frozen=True)
@@ -165,7 +166,7 @@ class StreetLights:
     window_share: float = 0.3
 
     def __post_init__(self) -> None:
-        require_one_of(self.mode, ("auto", "on", "off"), "street_lights.mode")
+        require_one_of(self.mode, STREET_LIGHT_MODES, "street_lights.mode")
         for name in ("switch_on_below", "lamp_illuminance", "window_luminance"):
             v = getattr(self, name)
             require(
@@ -190,8 +191,8 @@ class Exposure:
     whose auto exposure spans only EV100 10-12 by default), with no sensor noise. ``fixed``: gain
     1, so every dim scene is dark. ``max_gain`` is fitted on the paper's SIFT recall at one
     level (``benchmarks/bench_illumination.py``; docs/calibration.md). Sensor noise, if wanted,
-    grows with the gain: photon shot noise (variance ``shot_noise`` x gain per grey level) and read noise
-    (``read_noise`` x gain grey levels); ``Exposure(max_gain=65536, shot_noise=0.03)`` is
+    grows with the gain: photon shot noise (variance ``shot_noise`` x gain per grey level) and
+    read noise (``read_noise`` x gain grey levels); ``Exposure(max_gain=65536, shot_noise=0.03)`` is
     vlocbench's earlier night, a bright image paid for in shot noise (docs/fidelity.md)."""
 
     mode: Literal["auto", "fixed"] = "auto"

@@ -48,7 +48,7 @@ MAX_FRAME_LIGHTS = 8
 # lamps are lit nearest first to this point ahead of the camera, and the sun's shadows are
 # drawn around it
 VIEW_AIM_AHEAD_M = 15.0
-# half the side of the square the sun's shadow map covers (4096 texels: 3 cm each), and how far
+# half the side of the square the sun's shadow map covers (1024 texels: 12 cm each), and how far
 # back towards the sun its light is placed (the shadow map's depth starts there)
 SHADOW_HALF_WIDTH_M = 60.0
 SHADOW_LIGHT_BACK_M = 500.0
@@ -146,11 +146,7 @@ class Renderer:
                 m.mat_specular[mid] = 0.05 + 0.6 * wet
                 m.mat_shininess[mid] = 0.1 + 0.7 * wet
         zenith, horizon = sky_colors(conditions, self.sky_brightness)
-        image = tex.sky(tuple(zenith), tuple(horizon), SKY_SIZE)
-        start = m.tex_adr[sc.sky_texture_id]
-        m.tex_data[start : start + image.size] = image.ravel()
-        for r in self._renderers.values():
-            self._upload_texture(r, sc.sky_texture_id)
+        self._set_texture(sc.sky_texture_id, tex.sky(tuple(zenith), tuple(horizon), SKY_SIZE))
         # lights are drawn from data.light_xdir/xpos, which only mj_camlight derives from the
         # model's light_dir: without this the old sun shone until the next simulation step
         sc.forward()
@@ -169,11 +165,7 @@ class Renderer:
         m.mat_emission[sc.material_ids["windows_lit"]] = min(window, 1.0)
         if sl.window_share != self._window_share:
             self._window_share = sl.window_share
-            image = tex.lit_windows(sl.window_share)
-            start = m.tex_adr[sc.window_texture_id]
-            m.tex_data[start : start + image.size] = image.ravel()
-            for r in self._renderers.values():
-                self._upload_texture(r, sc.window_texture_id)
+            self._set_texture(sc.window_texture_id, tex.lit_windows(sl.window_share))
 
     def _apply_season(self, c: Conditions) -> None:
         m, sc = self.scene.model, self.scene
@@ -189,6 +181,14 @@ class Renderer:
         groups[GROUP_FOLIAGE_FULL] = c.season == "summer"
         groups[GROUP_FOLIAGE_SPARSE] = c.season == "autumn"
         self.option.geomgroup[:] = groups
+
+    def _set_texture(self, texture_id: int, image: NDArray[np.uint8]) -> None:
+        """Replace a texture's pixels in the model and in every GL context made so far."""
+        m = self.scene.model
+        start = m.tex_adr[texture_id]
+        m.tex_data[start : start + image.size] = image.ravel()
+        for r in self._renderers.values():
+            self._upload_texture(r, texture_id)
 
     def _upload_texture(self, r: mujoco.Renderer, texture_id: int) -> None:
         r._gl_context.make_current()
