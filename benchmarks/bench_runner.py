@@ -2,7 +2,7 @@
 overhead (store, scheduling, transfers, idle workers at the end) as a share of episode time.
 
     python benchmarks/bench_runner.py [--workers 1,2] [--repeats 3] [--out out/bench_runner]
-                                      [--one-thread] [--no-antialias]
+                                      [--one-thread] [--antialias]
 
 One worker runs in the driver process, whose OpenCV, torch and renderer use every core; a pool
 worker uses one thread of each. ``--one-thread`` limits this process as a pool worker is limited,
@@ -44,11 +44,9 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--out", type=Path, default=Path("out/bench_runner"))
     ap.add_argument("--one-thread", action="store_true", help="this process as a pool worker")
-    ap.add_argument(
-        "--no-antialias", action="store_true", help="render with Camera(antialias=False)"
-    )
+    ap.add_argument("--antialias", action="store_true", help="render with Camera(antialias=True)")
     args = ap.parse_args()
-    experiment = {**EXPERIMENT, "gallery": {"camera": {"antialias": not args.no_antialias}}}
+    experiment = {**EXPERIMENT, "gallery": {"camera": {"antialias": args.antialias}}}
     if args.one_thread:  # before torch and the renderer start, which read these then
         os.environ.update(WORKER_THREADS_ENV)
         cv2.setNumThreads(1)

@@ -25,10 +25,8 @@ def test_render_with_and_without_antialiasing(tmp_path):
     import numpy as np
 
     size = ["--width", "160", "--height", "120", "--waypoint", "40"]
-    assert main(["render", "town10", *size, "-o", str(tmp_path / "smooth.png")]) == 0
-    assert (
-        main(["render", "town10", *size, "--no-antialias", "-o", str(tmp_path / "hard.png")]) == 0
-    )
+    assert main(["render", "town10", *size, "--antialias", "-o", str(tmp_path / "smooth.png")]) == 0
+    assert main(["render", "town10", *size, "-o", str(tmp_path / "hard.png")]) == 0
     smooth, hard = (cv2.imread(str(tmp_path / f)).astype(int) for f in ("smooth.png", "hard.png"))
     changed = np.abs(smooth - hard).max(axis=2) > 10
     assert smooth.shape == (120, 160, 3) and 0 < changed.mean() < 0.1

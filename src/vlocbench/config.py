@@ -131,13 +131,23 @@ def to_dict(config: Any) -> Any:
 ADDED_OPTION = {"hash": "omit_default"}
 
 
+def default_changed(was: Any) -> dict[str, Any]:
+    """Field metadata of an ADDED_OPTION whose default later changed from ``was``: at ``was`` it
+    is still left out of config_hash (stored keys still match), at the new default it is not (so
+    results at the new default never take the old ones' keys)."""
+    return {"hash": "omit_value", "omit": was}
+
+
 def _hashed(config: Any) -> Any:
     """``to_dict`` for hashing: ADDED_OPTION fields at their default are left out."""
     if dataclasses.is_dataclass(config) and not isinstance(config, type):
         out = {}
         for f in dataclasses.fields(config):
             value = getattr(config, f.name)
-            if f.metadata.get("hash") == "omit_default" and value == _default(f):
+            rule = f.metadata.get("hash")
+            if rule == "omit_default" and value == _default(f):
+                continue
+            if rule == "omit_value" and value == f.metadata["omit"]:
                 continue
             out[f.name] = _hashed(value)
         return out

@@ -9,8 +9,8 @@ import pytest
 
 from tests.conftest import CAMERA
 from vlocbench.bench import EpisodeConfig, run_episode
+from vlocbench.bench.methods import RosEndpoint
 from vlocbench.bench.visual import VisualLocalizer
-from vlocbench.loc.localizer import RosEndpoint
 from vlocbench.ros.remote import RosLocalizer
 
 

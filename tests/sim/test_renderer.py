@@ -286,10 +286,10 @@ def test_beyond_its_range_the_camera_records_the_share_of_exposure_it_reached(sm
 
 
 def test_an_aliased_camera_sees_the_same_scene_with_harder_edges(small_sim):
-    """``antialias=False`` samples each pixel once: the same picture, only edge pixels differ
-    (each keeps its own GL context, so the two kinds of image interleave)."""
-    smooth_cam = Camera("g", SMALL, Extrinsics())
-    hard_cam = Camera("g", SMALL, Extrinsics(), antialias=False)
+    """``antialias=False`` (the default) samples each pixel once: the same picture as 4 samples,
+    only edge pixels differ (each keeps its own GL context, so the two kinds of image interleave)."""
+    smooth_cam = Camera("g", SMALL, Extrinsics(), antialias=True)
+    hard_cam = Camera("g", SMALL, Extrinsics())
     smooth = render(small_sim, Conditions(), smooth_cam).image.astype(np.int16)
     hard = render(small_sim, Conditions(), hard_cam).image.astype(np.int16)
     again = render(small_sim, Conditions(), smooth_cam).image.astype(np.int16)

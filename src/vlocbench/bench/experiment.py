@@ -28,11 +28,10 @@ from pathlib import Path
 from typing import Any, Literal
 
 from vlocbench.bench.episode import EPISODE_VERSION, EpisodeConfig
+from vlocbench.bench.methods import MethodSpec
 from vlocbench.config import config_hash, from_dict, load_yaml, require, to_dict
 from vlocbench.errors import ConfigError, UnknownNameError
-from vlocbench.loc.localizer import LocalizerConfig
 from vlocbench.loc.mapping import MappingConfig, map_name
-from vlocbench.loc.registry import METHODS, MethodConf, method_conf
 from vlocbench.sim import Camera, Conditions, builtin_town_names, gallery_camera
 from vlocbench.sim.scene import SCENE_VERSION
 from vlocbench.sim.town import TownSpec, load_town_spec
@@ -42,48 +41,6 @@ _CONDITION_KEYS = tuple(f.name for f in dataclasses.fields(Conditions))
 SWEEP_ROOTS = (*_CONDITION_KEYS, "camera", "cameras", "episode")
 # set per episode by its kind and repetition, so not sweepable
 _PER_TASK_EPISODE_KEYS = ("episode.mode", "episode.seed")
-
-
-@dataclass(frozen=True)
-class MethodSpec:
-    """A localization method as run by an experiment: a named preset, or its parts spelled out.
-
-    ``name`` labels it in results; it is the preset unless ``features``, ``matcher`` and
-    ``retrieval`` are given (registry names or dotted paths to plugin classes).
-    """
-
-    name: str
-    features: str = ""
-    matcher: str = ""
-    retrieval: str = ""
-    localizer: LocalizerConfig = field(default_factory=LocalizerConfig)
-    mapping: MappingConfig | None = None  # this method's map settings, else the experiment's
-
-    def __post_init__(self) -> None:
-        require(bool(self.name), "methods.name", "must not be empty")
-        parts = (self.features, self.matcher, self.retrieval)
-        if self.localizer.ros is not None:
-            require(not any(parts), f"methods.{self.name}",
-                    "a ROS 2 node (localizer.ros) has its own features, matcher and retrieval")  # fmt: skip
-            return
-        require(
-            all(parts) or not any(parts),
-            f"methods.{self.name}",
-            "give all of features, matcher and retrieval, or none (a preset)",
-        )
-        if not any(parts) and self.name not in METHODS:
-            raise UnknownNameError("method", self.name, METHODS)
-
-    @property
-    def needs_map(self) -> bool:
-        """False for an external ROS 2 node, which brings its own map."""
-        return self.localizer.ros is None
-
-    @property
-    def conf(self) -> MethodConf:
-        if self.features:
-            return MethodConf(self.features, self.matcher, self.retrieval)
-        return method_conf(self.name)
 
 
 @dataclass(frozen=True)

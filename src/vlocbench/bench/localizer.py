@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -16,6 +16,9 @@ from vlocbench.config import require
 from vlocbench.geometry import planar_pose
 from vlocbench.interfaces import Array
 from vlocbench.sim import Camera, Frame
+
+if TYPE_CHECKING:
+    from vlocbench.bench.methods import MethodContext
 
 
 @dataclass(frozen=True)
@@ -155,3 +158,10 @@ class OracleLocalizer:
         )
         var = np.array([c.position_sigma_m**2] * 2 + [np.radians(c.yaw_sigma_deg) ** 2])
         return PoseEstimate(True, pose, np.diag(np.maximum(var, 1e-4)))
+
+
+def oracle_localizer(context: MethodContext, config: OracleConfig) -> OracleLocalizer:
+    """The ``oracle`` kind of :data:`~vlocbench.bench.methods.LOCALIZER_KINDS`."""
+    oracle = OracleLocalizer(config)
+    oracle.name = context.name
+    return oracle

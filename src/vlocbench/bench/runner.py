@@ -24,13 +24,15 @@ from pathlib import Path
 from typing import Any
 
 from vlocbench.bench.episode import run_episode
-from vlocbench.bench.experiment import EpisodeTask, ExperimentPlan, MethodSpec
+from vlocbench.bench.experiment import EpisodeTask, ExperimentPlan
 from vlocbench.bench.gallery_capture import capture_gallery
+from vlocbench.bench.localizer import Localizer
+from vlocbench.bench.methods import MethodContext, MethodSpec, build_localizer, check_methods
 from vlocbench.bench.metrics import episode_metrics
 from vlocbench.bench.records import EpisodeResult
 from vlocbench.bench.store import EpisodeRow, ResultStore, StoreError
 from vlocbench.bench.towns import route_named, town_named
-from vlocbench.config import to_dict
+from vlocbench.config import config_hash, to_dict
 from vlocbench.errors import ConfigError
 from vlocbench.loc.gallery import GALLERY_FILE, Gallery
 from vlocbench.loc.mapping import MAP_FILE, MappingConfig, build_map, default_map_dir
@@ -96,7 +98,7 @@ class RunSummary:
 
 # -- the worker side ------------------------------------------------------------------------------
 _SIM: dict[tuple[str, Any], Simulator] = {}
-_LOCALIZER: dict[Any, Any] = {}
+_LOCALIZER: dict[str, Localizer] = {}
 
 
 def _simulator(task: EpisodeTask) -> Simulator:
@@ -113,26 +115,22 @@ def _simulator(task: EpisodeTask) -> Simulator:
     return sim
 
 
-def _localizer(task: EpisodeTask) -> Any:
-    """The last visual localizer of this process, reloaded only when map, config or rig change."""
+def _localizer(task: EpisodeTask) -> Localizer | None:
+    """The last localizer of this process, rebuilt only when method, map or rig change."""
     if task.method is None:
         return None
-    from vlocbench.bench.visual import VisualLocalizer
-
-    key = (task.map_dir, task.method.localizer, task.setup.cameras)
+    key = config_hash((task.method, task.map_dir, task.setup.cameras))
     if key not in _LOCALIZER:
         for old in _LOCALIZER.values():
             old.close()
         _LOCALIZER.clear()
-        endpoint = task.method.localizer.ros
-        if endpoint is not None:
-            from vlocbench.ros.remote import RosLocalizer
-
-            _LOCALIZER[key] = RosLocalizer(endpoint, task.setup.cameras, task.method.name)
-        else:
-            _LOCALIZER[key] = VisualLocalizer(
-                task.map_dir, task.setup.cameras, task.method.localizer, task.method.name
-            )
+        context = MethodContext(
+            name=task.method.name,
+            cameras=tuple(task.setup.cameras),
+            town=task.town,
+            map_dir=Path(task.map_dir) if task.map_dir else None,
+        )
+        _LOCALIZER[key] = build_localizer(task.method, context)
     return _LOCALIZER[key]
 
 
@@ -210,8 +208,8 @@ def prepare_maps(
     made side by side in as many processes (a gallery and a map build each use about one core)."""
     spec = plan.spec
     cache = Path(spec.cache).resolve()
-    if not (spec.recall or spec.failure):
-        return {}
+    if not (spec.recall or spec.failure) or not any(m.needs_map for m in spec.methods):
+        return {}  # no map to localize against, so no gallery either
     bars = _StageBars(progress)
     try:
         if workers > 1:
@@ -584,6 +582,7 @@ def run_experiment(
 ) -> RunSummary:
     """Run what the store of ``plan.output_dir`` does not have yet; returns the counts."""
     _check_workers(workers)  # before hours of gallery and map building, not after
+    check_methods(plan.spec.methods)
     t0 = time.perf_counter()
     with ResultStore(plan.output_dir, plan.name) as store:
         maps = prepare_maps(plan, progress, workers if scheduler is None else 1)

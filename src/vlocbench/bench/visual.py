@@ -11,12 +11,16 @@ from __future__ import annotations
 import time
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from vlocbench.bench.localizer import LocalizationQuery, PoseEstimate
 from vlocbench.geometry import invert_pose
 from vlocbench.loc.gallery import CameraModel
 from vlocbench.loc.localizer import LocalizerConfig, MapLocalizer
 from vlocbench.sim import Camera
+
+if TYPE_CHECKING:
+    from vlocbench.bench.methods import MethodContext
 
 
 def camera_model(camera: Camera) -> CameraModel:
@@ -81,3 +85,10 @@ class VisualLocalizer:
             fallback=not result.generalized and result.cameras[result.camera].fallback,
             **attempt,
         )  # fmt: skip
+
+
+def map_localizer(context: MethodContext, config: LocalizerConfig) -> VisualLocalizer:
+    """The ``map`` kind of :data:`~vlocbench.bench.methods.LOCALIZER_KINDS`."""
+    if context.map_dir is None:
+        raise ValueError(f"{context.name}: the map kind needs its map folder")
+    return VisualLocalizer(context.map_dir, context.cameras, config, context.name)

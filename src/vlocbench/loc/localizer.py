@@ -34,25 +34,6 @@ from vlocbench.loc.retrieval import nearest_poses, top_k
 MIN_PNP_POINTS = 4  # P3P's minimal sample and one point to choose among its solutions
 
 
-@dataclass(frozen=True)
-class RosEndpoint:
-    """A localization node outside this process, reached over ROS 2 (``vlocbench.ros``): each query
-    image goes out on ``image_topic`` (its camera on ``camera_info_topic``), and the answer is the
-    ``PoseWithCovarianceStamped`` of the base on ``pose_topic`` stamped with the image's time (a
-    ``diagnostics`` status for that stamp without a pose is a failure); ``timeout_s`` (wall clock)
-    without either is a failure too."""
-
-    image_topic: str = "image"
-    camera_info_topic: str = "camera_info"
-    pose_topic: str = "visual_pose_estimate"
-    timeout_s: float = 30.0
-
-    def __post_init__(self) -> None:
-        for name in ("image_topic", "camera_info_topic", "pose_topic"):
-            require(bool(getattr(self, name)), f"ros.{name}", "must not be empty")
-        require(self.timeout_s > 0, "ros.timeout_s", "must be > 0")
-
-
 RETRIEVAL_SOURCES = ("map", "pose-prior")  # LocalizerConfig.retrieval
 
 
@@ -70,8 +51,6 @@ class LocalizerConfig:
     # accumulate, and stop once a pose has this many inliers; saves most of the matching time of
     # slow matchers (LightGlue). 0: match every retrieved image, one PnP per cluster.
     confident_inliers: int = 0
-    # an external ROS 2 node answers instead of a map in this process (``vlocbench.ros``)
-    ros: RosEndpoint | None = field(default=None, metadata=ADDED_OPTION)
     # "map": the map's own retrieval; "pose-prior": the map images nearest the prior pose instead
     # (sequential localization with any map; with the true pose as prior, the local features alone)
     retrieval: str = field(default="map", metadata=ADDED_OPTION)

@@ -15,9 +15,9 @@ from collections.abc import Sequence
 from typing import Any
 
 from vlocbench.bench.localizer import LocalizationQuery, PoseEstimate
+from vlocbench.bench.methods import MethodContext, RosEndpoint
 from vlocbench.bench.visual import camera_model
 from vlocbench.errors import ConfigError
-from vlocbench.loc.localizer import RosEndpoint
 from vlocbench.ros.environment import local_only
 from vlocbench.ros.messages import (
     info_from_camera,
@@ -38,7 +38,7 @@ class RosLocalizer:
 
     def __init__(self, endpoint: RosEndpoint, cameras: Sequence[Camera], name: str) -> None:
         if len(cameras) != 1:
-            raise ConfigError("localizer.ros", f"a ROS node takes one camera, not {len(cameras)}")
+            raise ConfigError(f"methods.{name}", f"a ROS node takes one camera, not {len(cameras)}")
         local_only()
         import rclpy
         from diagnostic_msgs.msg import DiagnosticArray
@@ -92,7 +92,7 @@ class RosLocalizer:
         while self.image_pub.get_subscription_count() == 0:
             if time.monotonic() > deadline:
                 raise ConfigError(
-                    "localizer.ros",
+                    f"methods.{self.name}.args.image_topic",
                     f"no node subscribes to {self.endpoint.image_topic!r} "
                     f"after {self.endpoint.timeout_s:g} s",
                 )
@@ -140,3 +140,8 @@ class RosLocalizer:
         self.executor.shutdown()
         self.node.destroy_node()
         self.context.try_shutdown()
+
+
+def ros_localizer(context: MethodContext, endpoint: RosEndpoint) -> RosLocalizer:
+    """The ``ros`` kind of :data:`~vlocbench.bench.methods.LOCALIZER_KINDS`."""
+    return RosLocalizer(endpoint, context.cameras, context.name)

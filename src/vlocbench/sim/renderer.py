@@ -242,7 +242,7 @@ class Renderer:
         frame_id: int = 0,
         markers_world: NDArray[np.float64] | None = None,
         marker_radius_m: float = 0.1,
-        antialias: bool = True,
+        antialias: bool = False,
     ) -> Image:
         """RGB image (height, width, 3) from the optical-frame pose ``world_from_cam``.
 
