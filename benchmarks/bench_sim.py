@@ -4,7 +4,9 @@ Prints medians of several runs after a warm-up. Targets (issues 2 and 14, this 2
 800x600 render <= 40 ms by day, vehicle step + collision <= 1 ms, town scene build <= 5 s. Renders
 are timed with the default camera (one sample per pixel) and, by day and at night, with
 ``Camera(antialias=True)`` (4x multisampling); at night k = 8 and 10 the street lamps and lit windows are on (the
-default ``StreetLights``); ``shadows``: the sun casts shadows (``Conditions(shadows=True)``).
+default ``StreetLights``); ``shadows``: the sun casts shadows (``Conditions(shadows=True)``);
+``rain+puddles``: the paper's rain (1.0, deposits following it), ``rain 0.7``: streaks and wet
+materials without puddles.
 """
 
 from __future__ import annotations
@@ -64,7 +66,9 @@ def main() -> None:
             ("day, shadows", Conditions(shadows=True), default),
             ("k=4, shadows", Conditions(illumination=Illumination(k=4), shadows=True), default),
             ("fog 30 m", Conditions(weather=Weather(fog_visual_range_m=30)), default),
-            ("rain", Conditions(weather=Weather(rain=0.7)), default),
+            ("rain 0.7", Conditions(weather=Weather(rain=0.7, deposits=0.0)), default),
+            ("rain+puddles", Conditions(weather=Weather(rain=1.0)), default),
+            ("rain+fog 60", Conditions(weather=Weather(rain=1.0, fog_visual_range_m=60)), default),
             ("day, 4x AA", Conditions(), aa),
             ("k=8, 4x AA", Conditions(illumination=Illumination(k=8)), aa),
         ):

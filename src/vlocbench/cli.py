@@ -64,7 +64,12 @@ def _render(args: argparse.Namespace) -> int:
     town = generate_town(load_town_spec(args.town))
     conditions = Conditions(
         illumination=Illumination(k=args.k),
-        weather=Weather(fog_visual_range_m=args.fog, rain=args.rain, overcast=args.overcast),
+        weather=Weather(
+            fog_visual_range_m=args.fog,
+            rain=args.rain,
+            overcast=args.overcast,
+            deposits=args.deposits,
+        ),
         season=args.season,
         viewpoint=Viewpoint(args.dz, args.pitch_down),
         headlights=Headlights(on=args.headlights),
@@ -427,6 +432,12 @@ def _add_town_verbs(sub: Any, shared: dict[str, argparse.ArgumentParser]) -> Non
     p.add_argument("--fog", type=float, default=None, help="fog visual range in metres")
     p.add_argument("--rain", type=float, default=0.0, help="rain strength in [0, 1]")
     p.add_argument("--overcast", type=float, default=0.0, help="overcast in [0, 1]")
+    p.add_argument(
+        "--deposits",
+        type=float,
+        default=None,
+        help="puddles on the road in [0, 1] (default: --rain)",
+    )
     p.add_argument("--season", default="summer", help="summer, autumn or winter")
     p.add_argument("--headlights", action="store_true", help="switch the headlights on")
     p.add_argument("--street-lights", default="auto",

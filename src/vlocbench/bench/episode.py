@@ -64,7 +64,8 @@ from vlocbench.sim import Simulator, VehicleParams, VehicleState
 #    car's 70 deg steering (the sun and the maps change keys through their own configs)
 # 6: the town's lights at night (street lamps, lit windows); every light of a scene beyond the
 #    camera's range scaled by its exposure share before the 8-bit quantization, not after
-EPISODE_VERSION = 6
+# 7: CARLA's wet world in the rain: puddles that mirror the scene, wet (darker, glossier) facades
+EPISODE_VERSION = 7
 
 
 @dataclass(frozen=True)

@@ -12,7 +12,7 @@ from typing import Literal
 
 import numpy as np
 
-from vlocbench.config import require, require_one_of
+from vlocbench.config import ADDED_OPTION, require, require_one_of
 from vlocbench.errors import UnknownNameError
 
 Season = Literal["summer", "autumn", "winter"]
@@ -67,7 +67,10 @@ class Weather:
     fog_visual_range_m: float | None = None
     rain: float = 0.0
     overcast: float = 0.0
-    wetness: float | None = None  # wet look of the ground; defaults to ``rain``
+    wetness: float | None = None  # wet look of the ground and the facades; defaults to ``rain``
+    # puddles (CARLA's precipitation_deposits / 100): half the road under water at 1, mirroring
+    # the scene; defaults to ``rain``
+    deposits: float | None = field(default=None, metadata=ADDED_OPTION)
     fog_model: FogModel = "starts_at"
     fog_ramp_m: float = 5.0  # starts_at: from clear at v to opaque at v + fog_ramp_m
 
@@ -83,8 +86,12 @@ class Weather:
         for name in ("rain", "overcast"):
             v = getattr(self, name)
             require(0 <= v <= 1, f"weather.{name}", f"must be in [0, 1], got {v:g}")
-        if self.wetness is not None:
-            require(0 <= self.wetness <= 1, "weather.wetness", "must be in [0, 1]")
+        for name in ("wetness", "deposits"):
+            v = getattr(self, name)
+            if v is not None:
+                require(
+                    0 <= v <= 1, f"weather.{name}", f"must be in [0, 1] (or null: rain), got {v:g}"
+                )
 
     @property
     def fog_density_per_m(self) -> float:
@@ -94,6 +101,10 @@ class Weather:
     @property
     def ground_wetness(self) -> float:
         return self.rain if self.wetness is None else self.wetness
+
+    @property
+    def puddles(self) -> float:
+        return self.rain if self.deposits is None else self.deposits
 
 
 @dataclass(frozen=True)

@@ -25,7 +25,7 @@ from vlocbench.sim.light import (
     exposure_gain,
     sensor_noise,
 )
-from vlocbench.sim.rain import apply_rain
+from vlocbench.sim.rain import apply_puddles, apply_rain
 from vlocbench.sim.scene import (
     GROUP_COLLISION,
     GROUP_EGO,
@@ -93,6 +93,14 @@ class Renderer:
         self.conditions = conditions or Conditions()
         self._night_z = scene.model.geom_pos[list(scene.night_geom_ids), 2].copy()
         self._window_share = 0.0  # as the scene is built
+        m = scene.model
+        self._facade_ids = [
+            i for n, i in scene.material_ids.items() if n.startswith(("facade", "tower", "shops"))
+        ]
+        self._facade_base = {
+            i: (m.mat_rgba[i, :3].copy(), float(m.mat_specular[i]), float(m.mat_shininess[i]))
+            for i in self._facade_ids
+        }
         self.apply(self.conditions)
 
     # -- conditions -----------------------------------------------------------------------------
@@ -145,6 +153,13 @@ class Renderer:
                 m.mat_rgba[mid, :3] = base[:3] * (1 - 0.35 * wet)
                 m.mat_specular[mid] = 0.05 + 0.6 * wet
                 m.mat_shininess[mid] = 0.1 + 0.7 * wet
+        # wet walls: darker (water fills the pores) and glossier
+        for mid in self._facade_ids:
+            m.mat_rgba[mid, :3] = self._facade_base[mid][0] * (1 - 0.2 * wet)
+            m.mat_specular[mid] = self._facade_base[mid][1] + 0.3 * wet
+            m.mat_shininess[mid] = self._facade_base[mid][2] + 0.4 * wet * (
+                1 - self._facade_base[mid][2]
+            )
         zenith, horizon = sky_colors(conditions, self.sky_brightness)
         self._set_texture(sc.sky_texture_id, tex.sky(tuple(zenith), tuple(horizon), SKY_SIZE))
         # lights are drawn from data.light_xdir/xpos, which only mj_camlight derives from the
@@ -276,6 +291,25 @@ class Renderer:
         image = r.render()
         rain = self.conditions.weather.rain
         seed = zlib.crc32(f"{sc.town.spec.seed}:{frame_id}".encode())
+        deposits = self.conditions.weather.puddles
+        if deposits > 0:
+            depth = np.empty((height, width), np.float32)
+            mujoco.mjr_readPixels(None, depth, r._rect, r._mjr_context)
+            # reversed z, as MuJoCo's renderer keeps it: 1 at the near plane, 0 at the far one
+            depth_m = FAR_M * NEAR_M / ((FAR_M - NEAR_M) * np.flipud(depth) + NEAR_M)
+            f = width / 2 / np.tan(np.radians(fov_deg) / 2)
+            K = np.array([[f, 0, width / 2 - 0.5], [0, f, height / 2 - 0.5], [0, 0, 1.0]])
+            _, horizon = sky_colors(self.conditions, self.sky_brightness)
+            image = apply_puddles(
+                image,
+                depth_m.astype(np.float32),
+                K,
+                world_from_cam,
+                deposits,
+                sc.town.spec.seed,
+                horizon,
+                np.random.default_rng(seed + 2),
+            )
         if rain > 0:
             image = apply_rain(image, rain, self.sky_brightness, np.random.default_rng(seed))
         e = self.conditions.exposure
