@@ -31,7 +31,7 @@ from vlocbench.bench.experiment import load_experiment, resolve
 from vlocbench.bench.localizer import LocalizationQuery
 from vlocbench.bench.metrics import confident_wrong, place_recall, recall
 from vlocbench.bench.paper import paper_results
-from vlocbench.bench.runner import prepare_maps
+from vlocbench.bench.preparation import prepare_maps
 from vlocbench.bench.towns import route_named, town_named
 from vlocbench.bench.visual import VisualLocalizer
 from vlocbench.geometry import planar_pose, pose_error

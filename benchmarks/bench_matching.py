@@ -19,7 +19,7 @@ import time
 from collections.abc import Callable
 
 from vlocbench.bench.experiment import load_experiment
-from vlocbench.bench.runner import prepare_gallery
+from vlocbench.bench.preparation import prepare_gallery
 from vlocbench.loc.registry import build_features, build_matcher
 
 

@@ -26,7 +26,8 @@ from pathlib import Path
 import cv2
 
 from vlocbench.bench.experiment import load_experiment
-from vlocbench.bench.runner import WORKER_THREADS_ENV, run_experiment
+from vlocbench.bench.runner import run_experiment
+from vlocbench.bench.worker import WORKER_THREADS_ENV
 
 EXPERIMENT = {
     "name": "bench_runner",

@@ -14,7 +14,11 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("MPLCONFIGDIR", tempfile.mkdtemp(prefix="vlocbench-mpl-"))
 
 import numpy as np
+import yaml
 
+from vlocbench.bench.experiment import load_experiment
+from vlocbench.bench.runner import run_experiment
+from vlocbench.config import to_dict
 from vlocbench.sim.camera import Camera, Extrinsics, Intrinsics
 from vlocbench.sim.town import RouteSpec, TownSpec, generate_town
 
@@ -110,3 +114,26 @@ def call_behind_build_lock(folder, call, while_held=lambda: None, wait_s=1.0):
         while_held()
     waiting.join()
     return got[0]
+
+
+# -- a real experiment end to end: gallery, map, episodes, store (shared by the bench, ROS and CLI
+# tests; the run takes about 20 s) ------------------------------------------------------------------
+@pytest.fixture(scope="session")
+def tiny(tmp_path_factory):
+    root = tmp_path_factory.mktemp("tiny")
+    (root / "small.yaml").write_text(yaml.safe_dump(to_dict(small_spec())))
+    spec = {
+        "name": "tiny",
+        "towns": [str(root / "small.yaml")],
+        "route_length_m": 60,
+        "methods": ["sift-vlad"],
+        "sweep": {"illumination.k": [0, 6]},
+        "repetitions": 1,
+        "baseline_repetitions": 1,  # one odometry drive: the suite stays fast
+        "gallery": {"camera": {"intrinsics": {"width": 320, "height": 240}}},
+        "output": str(root / "out"),
+        "cache": str(root / "cache"),
+    }
+    (root / "tiny.yaml").write_text(yaml.safe_dump(spec))
+    summary = run_experiment(load_experiment(root / "tiny.yaml"), progress=False)
+    return root, summary

@@ -1,4 +1,7 @@
+import os
+
 import pytest
+import yaml
 
 from vlocbench.cli import build_parser, main
 
@@ -131,3 +134,31 @@ def test_run_part_of_an_experiment_names_what_it_lacks(capsys, tmp_path):
     with pytest.raises(SystemExit, match="2"):  # a usage error, from argparse
         main(["run", experiment, "--methods", " , "])
     assert "expected comma-separated names, got none" in capsys.readouterr().err
+
+
+def test_cli_run_and_report_errors(tiny, tmp_path, capsys):
+    from vlocbench.cli import main
+
+    root, _ = tiny
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(yaml.safe_dump({"towns": ["town10"], "methods": ["sift-vlad"],
+                                   "sweep": {"weather.fogg": [10]}}))  # fmt: skip
+    assert main(["run", str(bad)]) == 1
+    assert (
+        "valid: deposits, fog_model, fog_ramp_m, fog_visual_range_m, overcast, rain, wetness"
+        in (capsys.readouterr().err)
+    )
+    other = tmp_path / "other.yaml"
+    other.write_text(yaml.safe_dump({"towns": ["town10"], "baseline": True, "recall": False,
+                                     "failure": False, "output": str(root / "out")}))  # fmt: skip
+    assert main(["run", str(other), "--no-progress"]) == 1
+    assert "holds results of experiment 'tiny', not 'other'" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exc:  # a malformed command line: usage, 2
+        main(["run", str(other), "--workers", "0"])
+    assert exc.value.code == 2
+    assert "--workers: must be at least 1, got 0" in capsys.readouterr().err
+    assert main(["report", str(tmp_path / "empty")]) == 1
+    assert "holds no vlocbench results" in capsys.readouterr().err
+    assert main(["report", str(root / "out"), "--no-examples"]) == 0
+    assert "index.html" in capsys.readouterr().out
+    assert os.path.exists(root / "out" / "report" / "tables.md")

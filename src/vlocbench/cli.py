@@ -177,7 +177,8 @@ def _drive(args: argparse.Namespace) -> int:
 def _run(args: argparse.Namespace) -> int:
     from vlocbench.bench.experiment import load_experiment
     from vlocbench.bench.report import summary_lines, write_report
-    from vlocbench.bench.runner import default_workers, run_experiment
+    from vlocbench.bench.runner import run_experiment
+    from vlocbench.bench.worker import default_workers
 
     plan = load_experiment(args.experiment).only(args.towns or (), args.methods or ())
     if args.output:

@@ -12,7 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from vlocbench.bench.experiment import EpisodeTask
+from vlocbench.bench.executors import execute
+from vlocbench.bench.experiment import EpisodeTask, load_experiment
 from vlocbench.bench.records import (
     EpisodeResult,
     LocalizationRecord,
@@ -20,7 +21,9 @@ from vlocbench.bench.records import (
     Segment,
     Trajectory,
 )
-from vlocbench.bench.runner import EpisodeOutcome
+from vlocbench.bench.store import ResultStore
+from vlocbench.bench.worker import EpisodeOutcome
+from vlocbench.config import to_dict
 
 CONTROL_ENV = "VLOCBENCH_TEST_FAKES"  # folder of marker files that steer the fakes
 
@@ -120,3 +123,37 @@ def run_fake(task: EpisodeTask) -> EpisodeOutcome:
         time.sleep(float(slow.read_text() or 1))
     failures = 3 if task.kind == "baseline" else task.repetition % 2
     return EpisodeOutcome(task.key, synthetic_result(failures), 0.01)
+
+
+def fake_tasks():
+    spec = load_experiment({"name": "fake", "towns": ["town10"], "methods": ["sift-vlad"],
+                            "sweep": {"illumination.k": [0, 6]}, "repetitions": 2})  # fmt: skip
+    return spec.tasks()  # 2 x (1 + 2) + 10 = 16
+
+
+def fake_maps(plan):
+    """Map folders named as the runner names them (none is built: the fake episodes need none)."""
+    return {
+        (t, m.name): f"/nowhere/{plan.gallery_folder(t)}-0123456789/{plan.map_name(m)}"
+        for t in plan.spec.towns
+        for m in plan.spec.methods
+    }
+
+
+def run_fake_plans(root, *plans):
+    """Run ``plans`` in turn into the store at ``root`` as the runner would."""
+    with ResultStore(root, "ill") as store:
+        for plan in plans:
+            tasks = [t.on_maps(fake_maps(plan)) for t in plan.tasks()]
+            store.start_run(plan.spec.spec_hash, to_dict(plan), [t.key for t in tasks])
+            todo = [t for t in tasks if t.key not in store.done_keys()]
+            execute(todo, store, workers=1, runner=run_fake, progress=False)
+
+
+ILL_SPEC = {
+    "name": "ill",
+    "towns": ["town10"],
+    "methods": ["sift-vlad"],
+    "repetitions": 1,
+    "baseline_repetitions": 1,
+}

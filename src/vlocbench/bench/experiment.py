@@ -144,7 +144,7 @@ class EpisodeTask:
 
     def on_maps(self, map_dirs: Mapping[tuple[str, str], str]) -> EpisodeTask:
         """This task with its map folder, ``map_dirs[(town, method name)]`` (as
-        :func:`~vlocbench.bench.runner.prepare_maps` returns them)."""
+        :func:`~vlocbench.bench.preparation.prepare_maps` returns them)."""
         if self.method is None or not self.method.needs_map:
             return self
         return dataclasses.replace(self, map_dir=map_dirs[(self.town, self.method.name)])

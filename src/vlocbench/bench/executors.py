@@ -1,0 +1,311 @@
+"""Executors: run episode tasks inline, on a local process pool or on a Dask cluster, and write
+each outcome to the store as it arrives (the driver alone writes).
+
+At most one episode per worker is in flight, so a worker process that dies (a crash, the OOM
+killer) takes only those with it: they are retried up to ``max_attempts`` times; an episode that
+raises is recorded with its error and the run goes on.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import multiprocessing
+import os
+import time
+import traceback
+from collections import deque
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+from typing import Any
+
+from vlocbench.bench.experiment import EpisodeTask
+from vlocbench.bench.metrics import episode_metrics
+from vlocbench.bench.store import EpisodeRow, ResultStore
+from vlocbench.bench.towns import town_named
+from vlocbench.bench.worker import EpisodeOutcome, run_task, worker_init
+from vlocbench.config import to_dict
+from vlocbench.errors import ConfigError
+
+CONNECT_TIMEOUT_S = 10  # to a Dask scheduler
+
+
+@dataclass
+class Tally:
+    """What :func:`execute` did, counted as it goes: episodes finished, ended in an error, and run
+    again after their worker died (by us, or by Dask on another worker); workers lost; seconds in
+    episodes (summed over workers) and writing results; the most episodes at once."""
+
+    finished: int = 0
+    errors: int = 0
+    retried: int = 0
+    workers_lost: int = 0
+    episode_s: float = 0.0
+    store_s: float = 0.0
+    slots: int = 1
+
+
+def _row(task: EpisodeTask, outcome: EpisodeOutcome | None, error: str | None,
+         attempts: int) -> EpisodeRow:  # fmt: skip
+    config = {
+        "kind": task.kind,
+        "town": task.town,
+        "setup": {
+            "label": task.setup.label,
+            "conditions": to_dict(task.setup.conditions),
+            "cameras": to_dict(task.setup.cameras),
+        },
+        "method": to_dict(task.method) if task.method else None,
+        "map_dir": task.map_dir,
+        "episode": to_dict(task.episode),
+        "key": task.key,
+    }
+    metrics = asdict(episode_metrics(outcome.result)) if outcome else None
+    return EpisodeRow(
+        key=task.key,
+        kind=task.kind,
+        town=town_named(task.town).name,
+        method=task.method_name,
+        setup=task.setup.label,
+        repetition=task.repetition,
+        seed=task.episode.seed,
+        config=config,
+        status="ok" if outcome else "error",
+        error=error,
+        metrics=metrics,
+        wall_s=outcome.wall_s if outcome else None,
+        attempts=attempts,
+    )
+
+
+class Recorder:
+    """Writes each episode's outcome to the store as it arrives, counts it, advances the bar."""
+
+    def __init__(self, store: ResultStore, tally: Tally, total: int, progress: bool) -> None:
+        self.store, self.tally = store, tally
+        self.bar = None
+        if progress and total:
+            from tqdm import tqdm
+
+            self.bar = tqdm(total=total, unit="episode", dynamic_ncols=True)
+
+    def __call__(self, task: EpisodeTask, outcome: EpisodeOutcome | None, error: str | None,
+                 attempts: int) -> None:  # fmt: skip
+        t = time.perf_counter()
+        self.store.write_episode(_row(task, outcome, error, attempts),
+                                 outcome.result if outcome else None)  # fmt: skip
+        self.tally.store_s += time.perf_counter() - t
+        if outcome:
+            self.tally.finished += 1
+            self.tally.episode_s += outcome.wall_s
+        else:
+            self.tally.errors += 1
+        if self.bar is not None:
+            self.bar.set_postfix_str(
+                f"ok {self.tally.finished} err {self.tally.errors} | {task.town} "
+                f"{task.method_name} {task.kind}",
+                refresh=False,
+            )
+            self.bar.update(1)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+
+
+Runner = Callable[[EpisodeTask], EpisodeOutcome]
+
+
+def execute(
+    tasks: list[EpisodeTask],
+    store: ResultStore,
+    workers: int = 1,
+    scheduler: str | None = None,
+    runner: Runner = run_task,
+    max_attempts: int = 3,
+    progress: bool = True,
+) -> Tally:
+    """Run ``tasks``, writing each outcome as it arrives.
+
+    ``workers == 1`` without a scheduler runs in this process. Otherwise at most one episode per
+    worker is in flight, so a worker that dies takes only the episodes in flight with it: they are
+    run again (up to ``max_attempts`` in all) on a fresh pool; Dask reschedules them itself. An
+    interruption (Ctrl-C, SIGTERM, a store error) stops every worker of a local pool before it
+    propagates; what was stored stays stored.
+    """
+    check_workers(workers)
+    tally = Tally(slots=workers)
+    record = Recorder(store, tally, len(tasks), progress)
+    try:
+        if scheduler is not None:
+            _run_on_dask(tasks, scheduler, runner, record, tally)
+        elif workers == 1:
+            _run_inline(tasks, runner, record)
+        else:
+            _run_on_pool(tasks, workers, runner, record, tally, max_attempts)
+    finally:
+        record.close()
+    return tally
+
+
+def _run_inline(tasks: list[EpisodeTask], runner: Runner, record: Recorder) -> None:
+    for task in tasks:
+        try:
+            outcome = runner(task)
+        except Exception:  # an episode's bug must not end the run: record it
+            record(task, None, traceback.format_exc(limit=8), 1)
+            continue
+        record(task, outcome, None, 1)
+
+
+def local_pool(workers: int) -> cf.ProcessPoolExecutor:
+    return cf.ProcessPoolExecutor(
+        workers,
+        mp_context=multiprocessing.get_context("spawn"),
+        initializer=worker_init,
+        initargs=(os.getpid(),),
+    )
+
+
+def _run_on_pool(tasks: list[EpisodeTask], workers: int, runner: Runner, record: Recorder,
+                 tally: Tally, max_attempts: int) -> None:  # fmt: skip
+    """Local worker processes; a pool broken by a dead worker is replaced, and the episodes that
+    were in flight in it run again."""
+    attempts = dict.fromkeys((t.key for t in tasks), 0)
+    pending = deque(tasks)
+    while pending:
+        lost = _pool_round(pending, workers, runner, record, attempts)
+        if lost:
+            tally.workers_lost += 1
+        for task in lost:
+            if attempts[task.key] < max_attempts:
+                pending.appendleft(task)
+                tally.retried += 1
+            else:
+                record(task, None, "its worker process died", attempts[task.key])
+
+
+def _pool_round(pending: deque[EpisodeTask], workers: int, runner: Runner, record: Recorder,
+                attempts: dict[str, int]) -> list[EpisodeTask]:  # fmt: skip
+    """Run ``pending`` on one pool until it is empty or the pool breaks; returns the episodes
+    that were in flight when it broke."""
+    pool = local_pool(workers)
+    running: dict[cf.Future, EpisodeTask] = {}
+    lost: list[EpisodeTask] = []
+    try:
+        while (pending or running) and not lost:
+            while pending and len(running) < workers:
+                task = pending.popleft()
+                attempts[task.key] += 1
+                running[pool.submit(runner, task)] = task
+            done, _ = cf.wait(running, return_when=cf.FIRST_COMPLETED)
+            for future in done:
+                task = running.pop(future)
+                try:
+                    outcome = future.result()
+                except cf.process.BrokenProcessPool:
+                    lost.append(task)
+                    continue
+                except Exception as exc:
+                    record(task, None, _describe(exc), attempts[task.key])
+                    continue
+                record(task, outcome, None, attempts[task.key])
+        # a broken pool: everything still in flight died with it
+        return [*lost, *running.values()] if lost else []
+    finally:
+        if running or lost:  # interrupted or broken: don't wait for workers
+            kill_workers(pool)
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
+def kill_workers(pool: cf.ProcessPoolExecutor) -> None:
+    # the executor has no public way to stop workers in the middle of an episode
+    for process in list(getattr(pool, "_processes", {}).values()):
+        process.kill()
+
+
+def _run_on_dask(tasks: list[EpisodeTask], scheduler: str, runner: Runner, record: Recorder,
+                 tally: Tally, poll_s: float = 1.0) -> None:  # fmt: skip
+    """A Dask cluster: twice as many episodes in flight as it has threads, so that its workers
+    stay fed. Dask reruns the episodes of a worker that dies (giving up with ``KilledWorker``);
+    the scheduler's count of episodes caught in a worker's death and the workers that vanished
+    go into the tally."""
+    client = _dask_client(scheduler)
+    try:
+        tally.slots = sum(client.nthreads().values()) or 1
+        window = 2 * tally.slots
+        pending = deque(tasks)
+        running: dict[Any, EpisodeTask] = {}
+        seen = set(client.scheduler_info()["workers"])
+        prefix, suspicious_before = None, 0
+        while pending or running:
+            while pending and len(running) < window:
+                task = pending.popleft()
+                future = client.submit(runner, task, pure=False)
+                running[future] = task
+                if prefix is None:
+                    from dask.utils import key_split
+
+                    prefix = key_split(future.key)
+                    suspicious_before = _dask_suspicious(client, prefix)
+            done = _dask_wait(list(running), poll_s)
+            now = set(client.scheduler_info()["workers"])
+            tally.workers_lost += len(seen - now)
+            seen = now
+            if done and prefix is not None:  # before the results are released
+                tally.retried = _dask_suspicious(client, prefix) - suspicious_before
+            for future in done:
+                task = running.pop(future)
+                try:
+                    outcome = future.result()
+                except Exception as exc:
+                    record(task, None, _describe(exc), 1)
+                    continue
+                record(task, outcome, None, 1)
+        for future in running:
+            future.cancel()
+    finally:
+        client.close()
+
+
+def _dask_wait(futures: list[Any], timeout_s: float) -> list[Any]:
+    from distributed import wait
+
+    try:
+        done, _ = wait(futures, timeout=timeout_s, return_when="FIRST_COMPLETED")
+    except TimeoutError:
+        return []
+    return list(done)
+
+
+def _dask_suspicious(client: Any, prefix: str) -> int:
+    """How many times the scheduler saw tasks of ``prefix`` on a worker that died."""
+
+    def count(dask_scheduler: Any) -> int:
+        tp = dask_scheduler.task_prefixes.get(prefix)
+        return 0 if tp is None else int(tp.suspicious)
+
+    return int(client.run_on_scheduler(count))
+
+
+def check_workers(workers: int) -> None:
+    if workers < 1:
+        raise ConfigError("--workers", f"must be >= 1, got {workers}")
+
+
+def _describe(exc: BaseException) -> str:
+    if type(exc).__name__ == "KilledWorker":  # Dask gave up after its own retries
+        return f"its worker died on every attempt ({exc})"
+    return "".join(traceback.format_exception(exc, limit=8))
+
+
+def _dask_client(scheduler: str) -> Any:
+    try:
+        from distributed import Client
+    except ImportError:
+        raise ConfigError(
+            "--scheduler", "Dask is not installed: pip install 'vlocbench[dask]'"
+        ) from None
+    try:
+        return Client(scheduler, timeout=f"{CONNECT_TIMEOUT_S}s")
+    except OSError as exc:
+        raise ConfigError("--scheduler", f"cannot reach {scheduler}: {exc}") from None

@@ -1,0 +1,154 @@
+"""Preparing a run: each town's gallery (a ground-truth drive) and each method's map on it, made
+once and cached under the experiment's ``cache`` folder by a key of what determines them; with
+several workers, the missing ones are made side by side in pool processes."""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import logging
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from vlocbench.bench.executors import kill_workers, local_pool
+from vlocbench.bench.experiment import ExperimentPlan
+from vlocbench.bench.gallery_capture import capture_gallery
+from vlocbench.bench.methods import MethodSpec
+from vlocbench.bench.towns import route_named, town_named
+from vlocbench.loc.gallery import GALLERY_FILE, Gallery
+from vlocbench.loc.mapping import MAP_FILE, MappingConfig, build_map, default_map_dir
+from vlocbench.locks import building
+from vlocbench.sim import Simulator
+
+logger = logging.getLogger(__name__)
+
+
+class StageBars:
+    """One tqdm bar per preparation stage (gallery images, features, matches), updated by the
+    stages' progress callbacks; nothing when disabled."""
+
+    def __init__(self, enabled: bool) -> None:
+        self.enabled = enabled
+        self.bars: dict[str, Any] = {}
+
+    def __call__(self, stage: str, done: int, total: int) -> None:
+        if not self.enabled:
+            return
+        if stage not in self.bars:
+            from tqdm import tqdm
+
+            self.bars[stage] = tqdm(total=total, desc=stage, unit="image", dynamic_ncols=True)
+        bar = self.bars[stage]
+        bar.update(done - bar.n)
+
+    def close(self) -> None:
+        for bar in self.bars.values():
+            bar.close()
+        self.bars.clear()
+
+
+def prepare_maps(
+    plan: ExperimentPlan, progress: bool = False, workers: int = 1
+) -> dict[tuple[str, str], str]:
+    """Capture each town's gallery and build each method's map, unless the cache has them; returns
+    the map folders by (town, method name). With ``workers`` > 1 the galleries, then the maps, are
+    made side by side in as many processes (a gallery and a map build each use about one core)."""
+    spec = plan.spec
+    cache = Path(spec.cache).resolve()
+    if not (spec.recall or spec.failure) or not any(m.needs_map for m in spec.methods):
+        return {}  # no map to localize against, so no gallery either
+    bars = StageBars(progress)
+    try:
+        if workers > 1:
+            todo = [
+                t for t in spec.towns if not (_gallery_dir(plan, t, cache) / GALLERY_FILE).exists()
+            ]
+            _in_parallel(_gallery_job, [(plan, t, cache) for t in todo], workers, bars, "galleries")
+        galleries = {t: _gallery(plan, t, cache, bars) for t in spec.towns}
+        jobs = {}  # (town, method name) -> what _map builds it from
+        for town in spec.towns:
+            for method in (m for m in spec.methods if m.needs_map):
+                mapping = method.mapping or spec.mapping
+                map_dir = default_map_dir(cache / "maps", galleries[town], method.name,
+                                          method.conf, mapping)  # fmt: skip
+                jobs[(town, method.name)] = (town, galleries[town], method, mapping, map_dir)
+        if workers > 1:
+            todo = [j for j in jobs.values() if not (j[-1] / MAP_FILE).exists()]
+            _in_parallel(_map_job, todo, workers, bars, "maps")
+        return {key: str(_map(*job, bars)) for key, job in jobs.items()}
+    finally:
+        bars.close()
+
+
+def prepare_gallery(plan: ExperimentPlan, town_name: str, progress: bool = False) -> Gallery:
+    """The gallery of ``town_name`` as the experiment captures it, captured unless cached."""
+    bars = StageBars(progress)
+    try:
+        return _gallery(plan, town_name, Path(plan.spec.cache).resolve(), bars)
+    finally:
+        bars.close()
+
+
+def _in_parallel(job: Callable[..., object], args: list[tuple[Any, ...]], workers: int,
+                 bars: StageBars, stage: str) -> None:  # fmt: skip
+    """``job(*a)`` for every ``a`` of ``args`` on a pool of pool workers (one thread each); a
+    failure or an interruption stops the others. The jobs' own progress is not shown: one bar
+    counts the jobs."""
+    if len(args) < 2:
+        return  # one job runs in the driver, with every thread
+    logger.info(f"{len(args)} {stage} to make, {min(workers, len(args))} at a time")
+    pool = local_pool(min(workers, len(args)))
+    try:
+        futures = [pool.submit(job, *a) for a in args]
+        for n, future in enumerate(cf.as_completed(futures), 1):
+            future.result()
+            bars(stage, n, len(args))
+    except BaseException:
+        kill_workers(pool)
+        raise
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _gallery_job(plan: ExperimentPlan, town_name: str, cache: Path) -> None:
+    _gallery(plan, town_name, cache, StageBars(False))
+
+
+def _map_job(town_name: str, gallery: Gallery, method: MethodSpec, mapping: MappingConfig,
+             map_dir: Path) -> None:  # fmt: skip
+    _map(town_name, gallery, method, mapping, map_dir, StageBars(False))
+
+
+def _gallery_dir(plan: ExperimentPlan, town_name: str, cache: Path) -> Path:
+    return cache / "galleries" / plan.gallery_folder(town_name)
+
+
+def _gallery(plan: ExperimentPlan, town_name: str, cache: Path, bars: StageBars) -> Gallery:
+    spec, town = plan.spec, town_named(town_name)
+    gallery_dir = _gallery_dir(plan, town_name, cache)
+    with building(gallery_dir, "a gallery"):
+        if not (gallery_dir / GALLERY_FILE).exists():
+            logger.info(f"{town.name}: capturing the gallery in {gallery_dir}")
+            t = time.perf_counter()
+            route = route_named(town_name, spec.route_length_m)
+            shots = int(route.length_m / spec.gallery.spacing_m) + 1
+            with Simulator(town, spec.gallery.conditions) as sim:
+                capture_gallery(sim, route, (spec.gallery.camera,), gallery_dir,
+                                spec.gallery.spacing_m, spec.gallery.speed_mps,
+                                progress=lambda n: bars(f"{town.name} gallery", n, shots))  # fmt: skip
+            logger.info(f"{town.name}: gallery captured in {time.perf_counter() - t:.0f} s")
+    return Gallery.load(gallery_dir)
+
+
+def _map(town_name: str, gallery: Gallery, method: MethodSpec, mapping: MappingConfig,
+         map_dir: Path, bars: StageBars) -> Path:  # fmt: skip
+    """The map of ``method`` on the town's ``gallery`` in ``map_dir``, built unless it is there."""
+    name = town_named(town_name).name
+    if not (map_dir / MAP_FILE).exists():
+        logger.info(f"{name}: building the {method.name} map in {map_dir}")
+    label = f"{name} {method.name}"
+    report = build_map(gallery, method.conf, map_dir, mapping,
+                       progress=lambda stage, done, total: bars(f"{label} {stage}", done, total))  # fmt: skip
+    logger.info(f"{name}: {method.name} map: {report.images} images, {report.points} points")
+    return map_dir

@@ -1,0 +1,170 @@
+"""Executors: inline, a local pool that survives dead workers and stops on a signal, Dask on
+loopback; every outcome stored as it arrives."""
+
+import os
+import signal
+import sqlite3
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from tests.bench.fakes import CONTROL_ENV, fake_tasks, run_fake
+from vlocbench.bench.executors import execute
+from vlocbench.bench.store import DB_FILE, ResultStore
+
+
+def test_local_pool_retries_the_episode_of_a_dead_worker(tmp_path, control):
+    tasks = fake_tasks()
+    (control / "die-illumination.k=6-sift-vlad-1").touch()  # one failure episode's worker dies once
+    (control / "always-die-illumination.k=0-sift-vlad-0").touch()  # these die on every attempt
+    with ResultStore(tmp_path / "out", "fake") as store:
+        e = execute(tasks, store, workers=2, runner=run_fake, progress=False)
+        finished, errors, retried = e.finished, e.errors, e.retried
+        rows = {(r.setup, r.kind, r.repetition): r for r in store.rows(None) or []}
+        done = store.done_keys()
+    # the two always-dying tasks (recall and failure rep 0 at k = 0) end as errors after 3 attempts
+    assert errors == 2 and finished == len(tasks) - 2
+    assert retried >= 1 + 2 * 2
+    assert len(done) == len(tasks) - 2
+    with sqlite3.connect(tmp_path / "out" / DB_FILE) as db:
+        got = dict(db.execute("SELECT status, COUNT(*) FROM episodes GROUP BY status").fetchall())
+        died = db.execute("SELECT error, attempts FROM episodes WHERE status='error'").fetchall()
+    assert got == {"ok": len(tasks) - 2, "error": 2}
+    assert died == [("its worker process died", 3)] * 2
+    assert rows == {}  # no run was started: rows() lists a run's episodes only
+
+
+_DRIVER = """
+import sys
+from tests.bench.fakes import fake_tasks, run_fake
+from vlocbench.bench.executors import execute
+from vlocbench.bench.store import ResultStore
+from vlocbench.cli import _signals_interrupt
+
+scheduler = sys.argv[2] if len(sys.argv) > 2 else None
+with ResultStore(sys.argv[1], "fake") as store, _signals_interrupt():
+    try:
+        execute(fake_tasks(), store, workers=2, scheduler=scheduler, runner=run_fake,
+                progress=False)
+    except KeyboardInterrupt:
+        sys.exit(130)
+"""
+
+
+def _children(pid):
+    """Processes whose parent is ``pid`` (from /proc)."""
+    found = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid:
+            found.append(int(stat.parent.name))
+    return found
+
+
+def _alive(pids):
+    alive = []
+    for pid in pids:
+        try:
+            state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+        except OSError:
+            continue
+        if state != "Z":
+            alive.append(pid)
+    return alive
+
+
+@pytest.mark.parametrize("how", [signal.SIGKILL, signal.SIGTERM, signal.SIGINT])
+def test_a_killed_or_interrupted_run_leaves_no_process_and_a_consistent_store(
+    tmp_path, control, how
+):
+    (control / "sleep-illumination.k=0-sift-vlad-0").write_text("0")  # its two episodes finish
+    (control / "sleep-all").write_text("60")
+    env = {**os.environ, "PYTHONPATH": os.getcwd(), CONTROL_ENV: str(control)}
+    driver = subprocess.Popen(
+        [sys.executable, "-c", _DRIVER, str(tmp_path / "out")], env=env,
+        stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    deadline = time.monotonic() + 60
+    while len(_children(driver.pid)) < 3 and time.monotonic() < deadline:  # 2 workers, tracker
+        time.sleep(0.2)
+    workers = _children(driver.pid)
+    assert len(workers) >= 2, workers
+    while not (tmp_path / "out" / "episodes").exists() and time.monotonic() < deadline:
+        time.sleep(0.2)
+    time.sleep(0.5)
+    driver.send_signal(how)
+    code = driver.wait(timeout=30)
+    assert code == (-signal.SIGKILL if how == signal.SIGKILL else 130), driver.stderr.read()
+    deadline = time.monotonic() + 30  # a worker still starting up notices once it has started
+    while _alive(workers) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert _alive(workers) == []
+    with ResultStore(tmp_path / "out", "fake") as store:  # the lock is free, the store whole
+        done = store.done_keys()
+        assert len(done) == 2
+        for key in done:
+            assert store.read_table(key, "trajectory")["time_s"].shape == (50,)
+
+
+def test_dask_cluster_on_loopback(tmp_path, control):
+    distributed = pytest.importorskip("distributed")
+    tasks = fake_tasks()
+    (control / "die-illumination.k=6-sift-vlad-1").touch()
+    cluster = distributed.LocalCluster(
+        n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
+        dashboard_address=None, local_directory=str(tmp_path / "dask"),
+    )  # fmt: skip
+    with cluster, ResultStore(tmp_path / "out", "fake") as store:
+        e = execute(
+            tasks, store, scheduler=cluster.scheduler_address, runner=run_fake, progress=False
+        )
+        assert store.done_keys() == {t.key for t in tasks}
+    assert (e.finished, e.errors) == (len(tasks), 0)
+    assert e.slots == 2  # the cluster's threads, whatever --workers says
+    assert (e.workers_lost, e.retried) == (1, 1)  # the summary says a worker died
+    assert not (control / "die-illumination.k=6-sift-vlad-1").exists()  # it did die, once
+
+
+def test_an_interrupted_dask_run_leaves_the_cluster_idle(tmp_path, control):
+    """Dask cannot stop a task that is running, but nothing else of the run may stay queued."""
+    distributed = pytest.importorskip("distributed")
+    (control / "sleep-all").write_text("2")  # 8 episodes on 2 workers: about 8 s
+    cluster = distributed.LocalCluster(
+        n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
+        dashboard_address=None, local_directory=str(tmp_path / "dask"),
+    )  # fmt: skip
+    env = {**os.environ, "PYTHONPATH": os.getcwd(), CONTROL_ENV: str(control)}
+    with cluster, distributed.Client(cluster.scheduler_address) as client:
+        driver = subprocess.Popen(
+            [sys.executable, "-c", _DRIVER, str(tmp_path / "out"), cluster.scheduler_address],
+            env=env, stderr=subprocess.PIPE, text=True,
+        )  # fmt: skip
+        deadline = time.monotonic() + 60
+        while not client.processing() or not any(client.processing().values()):
+            assert time.monotonic() < deadline, "the run never started"
+            time.sleep(0.1)
+        driver.send_signal(signal.SIGTERM)
+        assert driver.wait(timeout=30) == 130, driver.stderr.read()
+        # the episodes in flight finish (2 s); none of the queued ones starts
+        deadline = time.monotonic() + 20
+        while client.run_on_scheduler(lambda dask_scheduler: len(dask_scheduler.tasks)):
+            assert time.monotonic() < deadline, client.processing()
+            time.sleep(0.2)
+    with ResultStore(tmp_path / "out", "fake") as store:
+        assert len(store.done_keys()) < len(fake_tasks())
+
+
+def test_an_unreachable_scheduler_is_a_clear_error(tmp_path, monkeypatch):
+    pytest.importorskip("distributed")
+    from vlocbench.bench import executors
+    from vlocbench.errors import ConfigError
+
+    monkeypatch.setattr(executors, "CONNECT_TIMEOUT_S", 1)
+    with ResultStore(tmp_path, "fake") as store, pytest.raises(ConfigError, match="cannot reach"):
+        execute(fake_tasks(), store, scheduler="tcp://127.0.0.1:9", runner=run_fake, progress=False)

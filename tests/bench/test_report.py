@@ -1,0 +1,56 @@
+"""Reports: a real run's page, and a sweep stored in parts reported whole."""
+
+import yaml
+
+from tests.bench.fakes import ILL_SPEC, run_fake_plans
+from vlocbench.bench.experiment import load_experiment
+
+
+def test_report_of_a_run(tiny):
+    from vlocbench.bench.report import write_report
+
+    root, _ = tiny
+    files = write_report(root / "out")
+    md = files.markdown.read_text()
+    assert "| sift-vlad |" in md and "| odometry only |" in md and "k=6" in md
+    assert "place recognition alone" in md and "| sift-vlad | 25 m |" in md
+    assert "/km) |" in md  # the fused recall with the EKF's lock losses in the ground-truth drive
+    assert r"\begin{tabular}" in files.latex.read_text()
+    assert {p.name for p in files.figures} == {"failure_rate_small.png", "failure_sites_small.png",
+                                               "failure_vs_recall.png", "computation_time.png"}  # fmt: skip
+    page = files.html.read_text()
+    assert page.count("data:image/png;base64,") == 4
+    assert page.count("data:image/jpeg;base64,") == 4  # query and gallery view per setup
+    assert 'src="http' not in page  # self-contained
+
+
+def test_a_sweep_run_in_parts_is_reported_whole(tmp_path, capsys):
+    """A sweep run a level at a time (as on a small machine): the latest run's report shows its
+    level, the experiment's report every level; episodes from another gallery do not count."""
+    from vlocbench.bench.report import write_report
+    from vlocbench.cli import main
+
+    whole = {**ILL_SPEC, "sweep": {"illumination.k": [0, 6]}}
+    (tmp_path / "ill.yaml").write_text(yaml.safe_dump(whole))
+    parts = [load_experiment({**ILL_SPEC, "sweep": {"illumination.k": [k]}}) for k in (6, 0)]
+    other_gallery = load_experiment({**whole, "gallery": {"spacing_m": 4.0}})
+    run_fake_plans(tmp_path, other_gallery, *parts)
+    latest = write_report(tmp_path, examples=False).summary
+    assert [s.label for s in latest.setups] == ["default"] and latest.episodes == 3
+
+    plan = load_experiment(tmp_path / "ill.yaml")
+    files = write_report(tmp_path, examples=False, plan=plan)
+    summary, planned = files.summary, plan.tasks()
+    assert summary.episodes == summary.planned == len(planned) == 5  # (recall, failure) x 2, base
+    for label in ("illumination.k=0", "illumination.k=6"):
+        cell = summary.cell("town10", "sift-vlad", label)
+        assert cell is not None and cell.failure is not None and cell.recall is not None, label
+        assert cell.keys <= {t.key for t in planned}  # none of the other gallery's
+    assert "5 of 5 episodes" in files.html.read_text()
+
+    assert main(["report", str(tmp_path), "--experiment", str(tmp_path / "ill.yaml"),
+                 "--no-examples"]) == 0  # fmt: skip
+    assert "5 of the 5 episodes of ill" in capsys.readouterr().out
+    (tmp_path / "t01.yaml").write_text(yaml.safe_dump({**whole, "towns": ["town01"]}))
+    assert main(["report", str(tmp_path), "--experiment", str(tmp_path / "t01.yaml")]) == 1
+    assert "holds no episode of experiment 'ill'" in capsys.readouterr().err

@@ -1,0 +1,62 @@
+"""Summaries: stored episodes found under the setups of the plan that reads them, also those of an
+earlier run of another sweep or of an older EPISODE_VERSION."""
+
+from tests.bench.fakes import ILL_SPEC, run_fake, run_fake_plans
+from vlocbench.bench.executors import execute
+from vlocbench.bench.experiment import load_experiment, plan_from_stored
+from vlocbench.bench.store import ResultStore, read_latest_run
+from vlocbench.bench.summary import summarize
+from vlocbench.config import to_dict
+
+
+def test_a_grouped_sweep_whose_keys_are_not_sorted_reports_every_cell(tmp_path):
+    """The store keeps JSON with sorted keys; the setups it gives back must be the same setups."""
+    levels = [{"fog_visual_range_m": v, "rain": 0.8, "overcast": 0.8} for v in (90, 30)]
+    spec = load_experiment({"name": "wx", "towns": ["town10"], "methods": ["sift-vlad"],
+                            "repetitions": 1, "sweep": {"weather": levels}})  # fmt: skip
+    tasks = spec.tasks()
+    with ResultStore(tmp_path, "wx") as store:
+        store.start_run(spec.spec.spec_hash, to_dict(spec), [t.key for t in tasks])
+        execute(tasks, store, workers=1, runner=run_fake, progress=False)
+    stored, rows = read_latest_run(tmp_path)
+    summary = summarize(plan_from_stored(stored), rows)
+    labels = [s.label for s in summary.setups]
+    assert labels == [
+        "weather(fog_visual_range_m=90, overcast=0.8, rain=0.8)",
+        "weather(fog_visual_range_m=30, overcast=0.8, rain=0.8)",
+    ]
+    for label in labels:
+        for method in ("sift-vlad", "odometry"):
+            cell = summary.cell("town10", method, label)
+            assert cell is not None and cell.failure is not None, (method, label)
+        assert summary.cell("town10", "sift-vlad", label).recall is not None
+
+
+def test_episodes_another_sweep_ran_first_count_under_this_plans_setups(tmp_path):
+    """The reduced sweep's k = 0 episodes were first run as a one-level sweep ("default")."""
+    first = load_experiment({**ILL_SPEC, "sweep": {"illumination.k": [0]}})
+    second = load_experiment({**ILL_SPEC, "sweep": {"illumination.k": [0, 6]}})
+    run_fake_plans(tmp_path, first, second)
+    stored, rows = read_latest_run(tmp_path)
+    assert {r.setup for r in rows} == {"default", "illumination.k=6"}  # as each run stored them
+    summary = summarize(plan_from_stored(stored), rows)
+    for label in ("illumination.k=0", "illumination.k=6"):
+        cell = summary.cell("town10", "sift-vlad", label)
+        assert cell is not None and cell.failure is not None and cell.recall is not None, label
+
+
+def test_an_old_runs_report_shows_its_episodes_where_they_were_stored(tmp_path, monkeypatch):
+    """A run stored by an earlier EPISODE_VERSION: its keys are none of the plan's now, yet its
+    report shows every cell, the baseline under every setup it served."""
+    import vlocbench.bench.experiment as experiment
+
+    run_fake_plans(tmp_path, load_experiment({**ILL_SPEC, "sweep": {"illumination.k": [0, 6]}}))
+    monkeypatch.setattr(experiment, "EPISODE_VERSION", experiment.EPISODE_VERSION + 1)
+    stored, rows = read_latest_run(tmp_path)
+    plan = plan_from_stored(stored)
+    assert not {t.key for t in plan.tasks()} & {r.key for r in rows}
+    summary = summarize(plan, rows)
+    for label in ("illumination.k=0", "illumination.k=6"):
+        for method in ("sift-vlad", "odometry"):
+            cell = summary.cell("town10", method, label)
+            assert cell is not None and cell.failure is not None, (method, label)
