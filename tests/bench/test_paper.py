@@ -5,7 +5,7 @@ from tests.bench.fakes import run_fake
 from vlocbench.bench.executors import execute
 from vlocbench.bench.experiment import load_experiment, plan_from_stored
 from vlocbench.bench.paper import paper_results, shape, spearman
-from vlocbench.bench.report import paper_comparison_tables
+from vlocbench.bench.report.comparison import paper_comparison_tables
 from vlocbench.bench.store import ResultStore, read_latest_run
 from vlocbench.bench.summary import summarize
 from vlocbench.config import to_dict

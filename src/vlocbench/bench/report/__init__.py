@@ -1,0 +1,141 @@
+"""Reports of a run: the paper's tables (Markdown and LaTeX), figures (PNG) and one self-contained
+HTML page, written to ``OUTPUT/report/``; a package by part: :mod:`.tables`, :mod:`.comparison`
+(beside the paper), :mod:`.figures` and :mod:`.page`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+from vlocbench.bench.experiment import ExperimentPlan, plan_from_stored
+from vlocbench.bench.report.comparison import paper_comparison_tables
+from vlocbench.bench.report.figures import (
+    computation_time_figure,
+    crash_sites_figure,
+    failure_figure,
+    failure_vs_recall_figure,
+    paper_failure_figure,
+)
+from vlocbench.bench.report.page import write_page
+from vlocbench.bench.report.tables import (
+    Table,
+    cause_table,
+    drift_table,
+    failure_table,
+    fragmentation_table,
+    latex,
+    markdown,
+    place_recall_table,
+    recall_table,
+)
+from vlocbench.bench.store import StoreError, read_episodes, read_latest_run
+from vlocbench.bench.summary import Summary, summarize
+
+REPORT_DIR = "report"
+__all__ = ["REPORT_DIR", "ReportFiles", "paper_comparison_tables", "summary_lines", "write_report"]
+
+
+@dataclass(frozen=True)
+class ReportFiles:
+    html: Path
+    markdown: Path
+    latex: Path
+    figures: tuple[Path, ...]
+    summary: Summary
+
+
+def report_tables(summary: Summary) -> list[tuple[str, Table]]:
+    out = []
+    for town in summary.towns:
+        name = summary.town_names[town]
+        out.append((f"{name}: failure rate F (failures/km, mean [bootstrap 95 % CI] over "
+                    f"{summary.spec.repetitions} repetitions) and computation time per query",
+                    failure_table(summary, town)))  # fmt: skip
+        out.append((f"{name}: failure rate by cause (failures/km; the paper counts collisions) "
+                    "and episodes that ran out of time", cause_table(summary, town)))  # fmt: skip
+        if summary.spec.recall and summary.spec.methods:
+            out.append((f"{name}: recall (%) at (0.25 m, 2°) / (0.5 m, 5°) / (5 m, 10°) on 6-DoF "
+                        "errors, ground-truth drive, raw localization (share of answers confident "
+                        "and wrong: beyond (5 m, 10°))", recall_table(summary, town)))  # fmt: skip
+            out.append((f"{name}: place recognition alone, Recall@1 / @5 / @10 (%) of a retrieved "
+                        "gallery image within 5, 10 and 25 m, same drive",
+                        place_recall_table(summary, town)))  # fmt: skip
+            out.append((f"{name}: recall (%) on planar (x, y, yaw) errors, same drive",
+                        recall_table(summary, town, "planar")))  # fmt: skip
+            out.append((f"{name}: recall (%) of the fused (EKF) pose at every step, same drive "
+                        "(lock losses per km: the EKF reset at the truth)",
+                        recall_table(summary, town, "fused")))  # fmt: skip
+        if summary.spec.baseline:
+            out.append((f"{name}: wheel-odometry drift of the EKF, at the end of each failure-free "
+                        "stretch over its length", drift_table(summary, town)))  # fmt: skip
+        out.append((f"{name}: where failures happen (25 m stretches of the route) and the "
+                    "mean tracking error", fragmentation_table(summary, town)))  # fmt: skip
+    return out + paper_comparison_tables(summary)
+
+
+def _write_tables(out: Path, tables: list[tuple[str, Table]]) -> tuple[Path, Path]:
+    """``tables.md`` and ``tables.tex``."""
+    md = out / "tables.md"
+    md.write_text("\n\n".join(f"**{caption}**\n\n{markdown(t)}" for caption, t in tables) + "\n")
+    tex = out / "tables.tex"
+    tex.write_text(
+        "% needs \\usepackage{booktabs, graphicx}\n"
+        + "\n\n".join(latex(t, c) for c, t in tables)
+        + "\n"
+    )
+    return md, tex
+
+
+def _write_figures(summary: Summary, out: Path) -> list[Path]:
+    from vlocbench.bench.towns import town_named
+
+    figures: list[Path] = []
+    for town in summary.towns:
+        name = summary.town_names[town]
+        figures.append(failure_figure(summary, town, out / f"failure_rate_{name}.png"))
+        figures.append(
+            crash_sites_figure(summary, town, town_named(town), out / f"failure_sites_{name}.png")
+        )
+        beside = paper_failure_figure(summary, town, out / f"failure_rate_{name}_paper.png")
+        if beside is not None:
+            figures.append(beside)
+    if summary.spec.methods:
+        if summary.spec.recall and summary.spec.failure:
+            figures.append(failure_vs_recall_figure(summary, out / "failure_vs_recall.png"))
+        figures.append(computation_time_figure(summary, out / "computation_time.png"))
+    return figures
+
+
+def write_report(
+    output_dir: str | Path, examples: bool = True, plan: ExperimentPlan | None = None
+) -> ReportFiles:
+    """Write the tables, figures and the HTML page of the latest run in ``output_dir``, or of
+    ``plan`` over every episode of it stored there (run in parts, by several runs)."""
+    if plan is None:
+        stored, rows = read_latest_run(output_dir)
+        plan = plan_from_stored(stored)
+    else:
+        rows = read_episodes(output_dir)
+        keys = {t.key for t in plan.tasks()}
+        rows = [r for r in rows if r.key in keys]
+        if not rows:
+            raise StoreError(f"{output_dir} holds no episode of experiment {plan.name!r}")
+    summary = summarize(plan, rows)
+    out = Path(output_dir) / REPORT_DIR
+    out.mkdir(parents=True, exist_ok=True)
+    tables = report_tables(summary)
+    md, tex = _write_tables(out, tables)
+    figures = _write_figures(summary, out)
+    page = write_page(summary, rows, tables, figures, examples, out)
+    return ReportFiles(page, md, tex, tuple(figures), summary)
+
+
+def summary_lines(summary: Summary) -> Sequence[str]:
+    """The failure-rate table of each town as plain text, for the end of a run."""
+    lines = []
+    for town in summary.towns:
+        lines.append(f"{summary.town_names[town]}:")
+        lines += markdown(failure_table(summary, town)).splitlines()
+    return lines

@@ -1,0 +1,202 @@
+"""The report's figures (PNG, matplotlib's Agg): failure rate against the swept level with the
+odometry line, failure rate against recall (the paper's Fig. 5), failure sites on the town map (its
+Fig. 6), computation time per method."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+
+from vlocbench.bench.paper import paper_results
+from vlocbench.bench.report.comparison import level_text, paper_axis
+from vlocbench.bench.report.tables import setup_header
+from vlocbench.bench.summary import BASELINE, Summary
+
+# the paper's methods in muted tones, so that ours stand out in the same axes
+PAPER_COLORS = (
+    "#9ecae1",
+    "#fdae6b",
+    "#a1d99b",
+    "#bcbddc",
+    "#fc9272",
+    "#c7c7c7",
+    "#dadaeb",
+    "#9edae5",
+)
+COLORS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2", "#17becf")
+
+
+def _x_axis(summary: Summary) -> tuple[list[float], list[str], str]:
+    values = summary.level_values()
+    labels = [setup_header(summary, s.label) for s in summary.setups]
+    if values is not None:
+        return values, [f"{v:g}" for v in values], summary.axis[0]
+    return list(range(len(labels))), labels, ", ".join(summary.axis) or "setup"
+
+
+def _save(fig: plt.Figure, path: Path) -> Path:
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def failure_figure(summary: Summary, town: str, path: Path) -> Path:
+    x, ticks, xlabel = _x_axis(summary)
+    fig, ax = plt.subplots(figsize=(7, 4))
+    for method, color in zip(summary.methods, COLORS * 4):
+        cells = [summary.cell(town, method, s.label) for s in summary.setups]
+        f = [c.failure if c else None for c in cells]
+        mean = np.array([v.mean if v else np.nan for v in f])
+        low = np.array([v.low if v else np.nan for v in f])
+        high = np.array([v.high if v else np.nan for v in f])
+        if method == BASELINE:
+            ax.plot(x, mean, "--", color="0.4", label="odometry only")
+            continue
+        ax.errorbar(x, mean, yerr=[mean - low, high - mean], fmt="o-", color=color, capsize=3,
+                    label=method)  # fmt: skip
+    ax.set_xticks(
+        x, ticks, rotation=30 if len(ticks) > 6 else 0, ha="right" if len(ticks) > 6 else "center"
+    )
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel("failure rate F (1/km)")
+    ax.set_ylim(bottom=0)
+    ax.set_title(f"{summary.town_names[town]}: failure rate (95 % CI)")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    return _save(fig, path)
+
+
+def paper_failure_figure(summary: Summary, town: str, path: Path) -> Path | None:
+    """F against the paper's levels: ours (solid, 95 % intervals) and the paper's published curves
+    (dashed) in the same axes, with both odometry lines; None when the run sweeps no factor of the
+    paper or the paper has no table for this town. The x axis is the paper's levels in order."""
+    found = paper_axis(summary)
+    name = summary.town_names[town]
+    if found is None or name not in found[0].failure_rate:
+        return None
+    table, ours_levels = found
+    paper = paper_results()
+    x = np.arange(len(table.levels))
+    fig, ax = plt.subplots(figsize=(7.5, 4.2))
+    for (method, f), color in zip(table.failure_rate[name].items(), PAPER_COLORS * 4):
+        ax.plot(x, f, "--", color=color, lw=1.2, alpha=0.8, label=f"paper: {method}")
+    ax.axhline(
+        paper.odometry_failure_rate[name], ls=":", color="0.5", lw=1.2, label="paper: odometry only"
+    )
+    at = [table.levels.index(lv) if lv in table.levels else None for lv in ours_levels]
+    for method, color in zip(summary.methods, COLORS * 4):
+        pts = []
+        for s, i in zip(summary.setups, at):
+            c = summary.cell(town, method, s.label)
+            if i is not None and c is not None and c.failure is not None:
+                pts.append((i, c.failure.mean, c.failure.low, c.failure.high))
+        if not pts:
+            continue
+        i, mean, low, high = (np.array(v) for v in zip(*sorted(pts)))
+        if method == BASELINE:
+            ax.axhline(float(np.mean(mean)), ls="-", color="0.3", lw=1.5, label="odometry only")
+            continue
+        ax.errorbar(
+            i,
+            mean,
+            yerr=[mean - low, high - mean],
+            fmt="o-",
+            color=color,
+            lw=2,
+            capsize=3,
+            label=method,
+        )
+    ax.set_xticks(
+        x,
+        [level_text(lv) for lv in table.levels],
+        rotation=30 if len(x) > 6 else 0,
+        ha="right" if len(x) > 6 else "center",
+    )
+    ax.set_xlabel(
+        {
+            "illumination": "illumination level k",
+            "viewpoint": "camera (z m, pitch deg)",
+            "weather": "fog visual range v (m)",
+        }.get(table.factor, table.factor)
+    )
+    ax.set_ylabel("failure rate F (1/km)")
+    ax.set_ylim(bottom=0)
+    ax.set_title(f"{name}: failure rate, vlocbench (solid) and the paper (dashed)")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7, ncol=2)
+    return _save(fig, path)
+
+
+def failure_vs_recall_figure(summary: Summary, path: Path) -> Path:
+    fig, ax = plt.subplots(figsize=(6, 4.5))
+    markers = "osD^v<>"
+    for method, color in zip(summary.methods, COLORS * 4):
+        if method == BASELINE:
+            continue
+        for town, marker in zip(summary.towns, markers * 4):
+            pts = [(100 * c.recall[0], c.failure.mean) for s in summary.setups
+                   if (c := summary.cell(town, method, s.label)) and c.recall and c.failure]  # fmt: skip
+            if pts:
+                r, f = zip(*pts)
+                label = (
+                    method if len(summary.towns) == 1 else f"{method}, {summary.town_names[town]}"
+                )
+                ax.scatter(r, f, color=color, marker=marker, label=label)
+    ax.set_xlabel("recall at (0.25 m, 2°), %")
+    ax.set_ylabel("failure rate F (1/km)")
+    ax.set_xlim(0, 100)
+    ax.set_ylim(bottom=0)
+    ax.grid(alpha=0.3)
+    if ax.collections:
+        ax.legend(fontsize=8)
+    else:  # no setup has both recall and failure episodes yet
+        ax.text(50, 0.5, "no setup with both recall and failure episodes", ha="center")
+    ax.set_title("failure rate against recall")
+    return _save(fig, path)
+
+
+def crash_sites_figure(summary: Summary, town: str, town_obj: Any, path: Path) -> Path:
+    from vlocbench.sim.birdseye import town_map_figure
+
+    fig = town_map_figure(town_obj, route=True)
+    ax = fig.axes[0]
+    for method, color in zip(summary.methods, COLORS * 4):
+        cells = {c.keys: c for s in summary.setups if (c := summary.cell(town, method, s.label))}
+        xy = [p for c in cells.values() for p in c.sites_xy]  # shared baselines counted once
+        if not xy:
+            continue
+        xs, ys = zip(*xy)
+        if method == BASELINE:
+            ax.scatter(
+                xs, ys, marker=".", s=18, c="0.35", zorder=9, label=f"odometry only ({len(xy)})"
+            )
+        else:
+            ax.scatter(xs, ys, marker="x", s=36, c=color, zorder=10, label=f"{method} ({len(xy)})")
+    ax.legend(loc="upper right", fontsize=7)
+    ax.set_title(f"{summary.town_names[town]}: failure sites, all setups and repetitions")
+    return _save(fig, path)
+
+
+def computation_time_figure(summary: Summary, path: Path) -> Path:
+    methods = [m for m in summary.methods if m != BASELINE]
+    fig, ax = plt.subplots(figsize=(6, 3.5))
+    width = 0.8 / max(1, len(summary.towns))
+    for k, town in enumerate(summary.towns):
+        ct = []
+        for m in methods:
+            values = [c.ct_s for s in summary.setups if (c := summary.cell(town, m, s.label))]
+            finite = [v for v in values if np.isfinite(v)]
+            ct.append(1000 * float(np.mean(finite)) if finite else 0.0)
+        ax.bar(np.arange(len(methods)) + k * width, ct, width, label=summary.town_names[town])
+    ax.set_xticks(np.arange(len(methods)) + width * (len(summary.towns) - 1) / 2, methods)
+    ax.set_ylabel("computation time per query (ms)")
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3, axis="y")
+    return _save(fig, path)

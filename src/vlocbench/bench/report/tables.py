@@ -1,0 +1,202 @@
+"""The report's tables, each a (header, rows) of strings for Markdown, LaTeX and HTML alike: failure
+rates with their intervals and the computation time (the paper's Table 2; its viewpoint and weather
+tables have the same shape), recall of the ground-truth drive (its Table 5), place recognition,
+failures by cause and place, and the odometry's drift."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+import matplotlib
+
+matplotlib.use("Agg")
+import numpy as np
+
+from vlocbench.bench.metrics import PLACE_RADII_M
+from vlocbench.bench.summary import BASELINE, Cell, Summary
+
+Table = tuple[list[str], list[list[str]]]  # header, rows
+
+
+def setup_header(summary: Summary, label: str) -> str:
+    """A setup's column header: its levels without the dotted prefixes."""
+    setup = next(s for s in summary.setups if s.label == label)
+    if not setup.levels:
+        return "default"
+    parts = []
+    for key, value in setup.levels:
+        name = key.split(".")[-1]
+        if isinstance(value, dict):
+            parts.append(", ".join(f"{k}={value[k]}" for k in sorted(value)))
+        elif key == "cameras":
+            parts.append(f"{len(value)} cameras")
+        else:
+            parts.append(f"{name}={value}")
+    return "; ".join(parts)
+
+
+def method_label(method: str) -> str:
+    return "odometry only" if method == BASELINE else method
+
+
+def fmt(value: float, digits: int = 1) -> str:
+    return "–" if value is None or not np.isfinite(value) else f"{value:.{digits}f}"
+
+
+def failure_table(summary: Summary, town: str) -> Table:
+    header = ["method", *(setup_header(summary, s.label) for s in summary.setups), "CT (ms)"]
+    rows = []
+    for method in summary.methods:
+        row = [method_label(method)]
+        cts = []
+        for s in summary.setups:
+            c = summary.cell(town, method, s.label)
+            if c is None or c.failure is None:
+                row.append("–")
+                continue
+            f = c.failure
+            row.append(f"{fmt(f.mean)} [{fmt(f.low)}, {fmt(f.high)}]")
+            cts.append(c.ct_s)
+        finite = [v for v in cts if np.isfinite(v)]
+        row.append(fmt(1000 * float(np.mean(finite)), 0) if finite else "–")
+        rows.append(row)
+    return header, rows
+
+
+RecallKind = Literal["6dof", "planar", "fused"]
+
+
+def recall_table(summary: Summary, town: str, kind: RecallKind = "6dof") -> Table:
+    """T1 / T2 / T3 (%) of the ground-truth drive: the raw answers on 6-DoF errors (the paper's,
+    with the share of confident wrong answers beside it), on planar errors, or the fused pose."""
+    header = ["method", *(setup_header(summary, s.label) for s in summary.setups)]
+    rows = []
+    for method in (m for m in summary.methods if m != BASELINE):
+        row = [method]
+        for s in summary.setups:
+            c = summary.cell(town, method, s.label)
+            r = None
+            if c is not None:
+                r = {"6dof": c.recall, "planar": c.recall_planar, "fused": c.recall_ekf}[kind]
+            text = " / ".join(fmt(100 * v) for v in r[:3]) if r else "–"
+            if r and kind == "fused" and c is not None and np.isfinite(c.lock_losses_per_km):
+                text += f" ({fmt(c.lock_losses_per_km)}/km)"
+            if r and kind == "6dof" and c is not None:
+                text += f" ({fmt(100 * c.confident_wrong)} wrong)"
+            row.append(text)
+        rows.append(row)
+    return header, rows
+
+
+def place_recall_table(summary: Summary, town: str) -> Table:
+    """Retrieval alone in the ground-truth drive: Recall@1 / @5 / @10 (%) of a retrieved image
+    within each distance, a row per (method, distance)."""
+    header = ["method", "within", *(setup_header(summary, s.label) for s in summary.setups)]
+    rows = []
+    for method in (m for m in summary.methods if m != BASELINE):
+        for j, radius_m in enumerate(PLACE_RADII_M):
+            row = [method, f"{radius_m:g} m"]
+            for s in summary.setups:
+                c = summary.cell(town, method, s.label)
+                r = c.place_recall if c is not None else None
+                values = r[j :: len(PLACE_RADII_M)] if r else ()
+                finite = r is not None and any(np.isfinite(v) for v in values)
+                row.append(" / ".join(fmt(100 * v) for v in values) if finite else "–")
+            rows.append(row)
+    return header, rows
+
+
+def cause_table(summary: Summary, town: str) -> Table:
+    """F split by the cause of the failures (they add up to F), and the time-outs."""
+    cells = [
+        (method, s, c)
+        for method in summary.methods
+        for s in summary.setups
+        if (c := summary.cell(town, method, s.label)) is not None and c.failure is not None
+    ]
+    causes = sorted({k for _, _, c in cells for k in c.failure_by_cause} | {"collision"})
+    header = ["method", "setup", *causes, "timed-out episodes"]
+    rows, seen = [], set()
+    for method, s, c in cells:
+        if c.keys in seen:  # a shared baseline once
+            continue
+        seen.add(c.keys)
+        label = "all" if method == BASELINE else setup_header(summary, s.label)
+        rows.append([method_label(method), label,
+                     *(fmt(c.failure_by_cause.get(k, 0.0)) for k in causes), str(c.timeouts)])  # fmt: skip
+    return header, rows
+
+
+def baseline_cell(summary: Summary, town: str) -> Cell | None:
+    """The odometry-only cell of a town (the first setup's: setups share it unless traffic
+    differs)."""
+    cells = (summary.cell(town, BASELINE, s.label) for s in summary.setups)
+    return next((c for c in cells if c is not None), None)
+
+
+def drift_table(summary: Summary, town: str) -> Table:
+    """The odometry-only EKF's drift as the paper measured it (at the end of each failure-free
+    stretch, over its length; the paper: 8.5 % and 0.4 deg/m)."""
+    header = ["method", "position drift (%)", "yaw drift (deg/m)", "stretches", "paper"]
+    c = baseline_cell(summary, town)
+    if c is None:
+        return header, []
+    d = c.drift
+    return header, [
+        [
+            "odometry only",
+            fmt(d.position_percent),
+            fmt(d.yaw_deg_per_m, 2),
+            str(d.segments),
+            "8.5 % and 0.40 deg/m",
+        ]
+    ]
+
+
+def fragmentation_table(summary: Summary, town: str) -> Table:
+    """Where the failures happen: over the repetitions of each method and setup, how many, at how
+    many distinct 25 m stretches of the route, the worst stretch, and the tracking error."""
+    header = ["method", "setup", "failures", "places", "worst stretch (share)", "tracking (m)"]
+    rows = []
+    for method in summary.methods:
+        seen = set()
+        for s in summary.setups:
+            c = summary.cell(town, method, s.label)
+            if c is None or c.fragmentation is None or c.keys in seen:
+                continue
+            seen.add(c.keys)  # a shared baseline once
+            f = c.fragmentation
+            worst = f"{f.worst_s_m:.0f} m ({100 * f.top_share:.0f} %)" if f.failures else "–"
+            shared = method == BASELINE and all(
+                (x := summary.cell(town, method, o.label)) is None or x.keys == c.keys
+                for o in summary.setups
+            )
+            label = "all" if shared else setup_header(summary, s.label)
+            rows.append([method_label(method), label,
+                         str(f.failures), str(f.places), worst, fmt(c.tracking_error_m, 2)])  # fmt: skip
+    return header, rows
+
+
+def markdown(table: Table) -> str:
+    header, rows = table
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    lines += ["| " + " | ".join(r) + " |" for r in rows]
+    return "\n".join(lines)
+
+
+def latex_escape(text: str) -> str:
+    for a, b in (("\\", r"\textbackslash{}"), ("_", r"\_"), ("%", r"\%"), ("&", r"\&"),
+                 ("#", r"\#"), ("–", "--")):  # fmt: skip
+        text = text.replace(a, b)
+    return text
+
+
+def latex(table: Table, caption: str) -> str:
+    header, rows = table
+    body = [" & ".join(latex_escape(c) for c in r) + r" \\" for r in rows]
+    return "\n".join([
+        r"\begin{table}[t]", r"\centering", rf"\caption{{{latex_escape(caption)}}}",
+        r"\resizebox{\linewidth}{!}{%", r"\begin{tabular}{l" + "c" * (len(header) - 1) + "}",
+        r"\toprule", " & ".join(latex_escape(h) for h in header) + r" \\", r"\midrule",
+        *body, r"\bottomrule", r"\end{tabular}}", r"\end{table}",
+    ])  # fmt: skip
