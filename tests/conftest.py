@@ -43,9 +43,8 @@ def small_town():
 def small_sim(small_town):
     from vlocbench.sim import Simulator
 
-    sim = Simulator(small_town)
-    yield sim
-    sim.close()
+    with Simulator(small_town) as sim:
+        yield sim
 
 
 # -- a short real gallery of the small town (320x240), captured once per test session --------
@@ -70,10 +69,8 @@ def gallery(small_town, stretch, tmp_path_factory):
     from vlocbench.bench.gallery_capture import capture_gallery
     from vlocbench.sim import Simulator
 
-    sim = Simulator(small_town)
-    g = capture_gallery(sim, stretch, (CAMERA,), tmp_path_factory.mktemp("gallery"))
-    sim.close()
-    return g
+    with Simulator(small_town) as sim:
+        return capture_gallery(sim, stretch, (CAMERA,), tmp_path_factory.mktemp("gallery"))
 
 
 @pytest.fixture(scope="session")

@@ -38,11 +38,27 @@ def test_render_with_and_without_antialiasing(tmp_path):
 def test_drive_prints_failure_rates(capsys, tmp_path):
     config = tmp_path / "episode.yaml"
     config.write_text("mode: ground_truth\nlocalization_rate_hz: 1.0\n")
-    assert main(["drive", "town10", "--localizer", "oracle", "--config", str(config)]) == 0
+    plot = tmp_path / "drive.png"
+    assert (
+        main(
+            [
+                "drive",
+                "town10",
+                "--localizer",
+                "oracle",
+                "--config",
+                str(config),
+                "--plot",
+                str(plot),
+            ]
+        )
+        == 0
+    )
     out = capsys.readouterr().out
     assert "town10: route 489 m; oracle, ground_truth" in out
     assert "seed 0: 0 failures (0.0/km)" in out and "done" in out
     assert "failure rate F = 0.0 per km over 1 episodes" in out
+    assert f"wrote {plot}" in out and plot.read_bytes()[:4] == b"\x89PNG"
 
 
 def test_drive_rejects_unknown_localizers_and_bad_configs(capsys, tmp_path):

@@ -158,11 +158,12 @@ def _drive(args: argparse.Namespace) -> int:
         f"{town.name}: route {path.length_m:.0f} m; {args.localizer}, {base.mode}; "
         f"config {config_hash(base)}"
     )
-    rates = []
+    rates, drives = [], {}
     with Simulator(town) as sim:
         for seed in range(args.seed, args.seed + args.seeds):
             r = run_episode(sim, path, localizer, dataclasses.replace(base, seed=seed))
             rates.append(r.failures_per_km)
+            drives[f"seed {seed}"] = r
             causes = ", ".join(f"{x.cause} at {x.resume_s_m:.0f} m" for x in r.reinitializations)
             print(
                 f"  seed {seed}: {r.failures} failures ({r.failures_per_km:.1f}/km), tracking "
@@ -171,6 +172,10 @@ def _drive(args: argparse.Namespace) -> int:
                 + (f"; {causes}" if causes else "")
             )
     print(f"failure rate F = {np.mean(rates):.1f} per km over {len(rates)} episodes")
+    if args.plot:
+        from vlocbench.bench.plots import save_episode_map
+
+        print(f"wrote {save_episode_map(town, drives, args.plot)}")
     return 0
 
 
@@ -469,6 +474,9 @@ def _add_drive_verb(sub: Any, shared: dict[str, argparse.ArgumentParser]) -> Non
     p.add_argument("--seeds", type=_count, default=1, help="number of episodes (seeds), >= 1")
     p.add_argument("--oracle-sigma", type=float, default=0.1, help="oracle position noise, m")
     p.add_argument("--oracle-yaw-deg", type=float, default=1.0, help="oracle yaw noise, deg")
+    p.add_argument(
+        "--plot", type=Path, help="PNG of the drives on the town map (true and EKF paths, failures)"
+    )
     p.set_defaults(func=_drive)
 
 

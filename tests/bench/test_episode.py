@@ -22,9 +22,8 @@ from vlocbench.sim import Camera, Extrinsics, Intrinsics, Simulator
 
 @pytest.fixture(scope="module")
 def sim(small_town):
-    s = Simulator(small_town)
-    yield s
-    s.close()
+    with Simulator(small_town) as s:
+        yield s
 
 
 @pytest.fixture(scope="module")

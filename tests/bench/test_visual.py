@@ -8,9 +8,8 @@ from vlocbench.sim import Simulator
 
 def test_visual_localizer_in_a_ground_truth_episode(small_town, stretch, sift_map):
     localizer = VisualLocalizer(sift_map[0], (CAMERA,), name="sift")
-    sim = Simulator(small_town)
-    r = run_episode(sim, stretch, localizer, EpisodeConfig(mode="ground_truth"))
-    sim.close()
+    with Simulator(small_town) as sim:
+        r = run_episode(sim, stretch, localizer, EpisodeConfig(mode="ground_truth"))
     assert r.completed and r.localizer == "sift"
     recs = r.localizations
     assert len(recs) >= 25
@@ -30,9 +29,8 @@ def test_a_two_camera_rig_in_a_ground_truth_episode(small_town, stretch, sift_ma
 
     back = Camera("right-back", CAMERA.intrinsics, Extrinsics(x_m=0.0, yaw_deg=-70.0))
     localizer = VisualLocalizer(sift_map[0], (CAMERA, back), name="sift-rig")
-    sim = Simulator(small_town)
-    r = run_episode(sim, stretch.head(30.0), localizer, EpisodeConfig(mode="ground_truth"))
-    sim.close()
+    with Simulator(small_town) as sim:
+        r = run_episode(sim, stretch.head(30.0), localizer, EpisodeConfig(mode="ground_truth"))
     ok = [x for x in r.localizations if x.success]
     assert len(ok) >= 0.9 * len(r.localizations) >= 9
     assert np.median([x.position_error_m for x in ok]) < 0.1
@@ -47,9 +45,8 @@ def test_sequential_localization_from_the_ekf_prior_navigates(
 
     build_map(gallery, method_conf("sift-prior"), tmp_path / "prior")
     localizer = VisualLocalizer(tmp_path / "prior", (CAMERA,), name="sift-prior")
-    sim = Simulator(small_town)
-    r = run_episode(sim, stretch, localizer, EpisodeConfig(seed=3))
-    sim.close()
+    with Simulator(small_town) as sim:
+        r = run_episode(sim, stretch, localizer, EpisodeConfig(seed=3))
     assert r.completed and r.failures == 0
     ok = [x for x in r.localizations if x.success]
     assert len(ok) >= 0.8 * len(r.localizations) >= 18  # 60 m at 4-5 m/s, 2 Hz

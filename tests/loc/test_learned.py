@@ -51,10 +51,9 @@ def test_aliked_lightglue_and_effnet_localize_offline(
     report = build_map(small, method_conf("aliked-lightglue"), out, MappingConfig(num_pairs=3))
     assert report.points > 300
     localizer = MapLocalizer(out)
-    sim = Simulator(small_town)
-    sim.teleport(*query_pose(stretch, 6))
-    frame = sim.render([CAMERA])[0]
-    sim.close()
+    with Simulator(small_town) as sim:
+        sim.teleport(*query_pose(stretch, 6))
+        frame = sim.render([CAMERA])[0]
     result = localizer.localize(frame.image, camera_model(CAMERA))
     assert result.success, result.reason
     assert np.linalg.norm(result.world_from_cam[:3, 3] - frame.world_from_cam[:3, 3]) < 0.25

@@ -6,26 +6,20 @@ import pytest
 from tests.conftest import CAMERA, query_pose
 from vlocbench.bench.visual import camera_model
 from vlocbench.errors import LocalizationError
+from vlocbench.geometry import pose_error
 from vlocbench.loc.localizer import LocalizerConfig, MapLocalizer
 from vlocbench.sim import Simulator
 
 
 @pytest.fixture(scope="module")
 def sim(small_town):
-    s = Simulator(small_town)
-    yield s
-    s.close()
+    with Simulator(small_town) as s:
+        yield s
 
 
 def _render(sim, pose):
     sim.teleport(*pose)
     return sim.render([CAMERA])[0]
-
-
-def _errors(world_from_cam, truth):
-    dt = float(np.linalg.norm(world_from_cam[:3, 3] - truth[:3, 3]))
-    R = world_from_cam[:3, :3].T @ truth[:3, :3]
-    return dt, float(np.degrees(np.arccos(np.clip((np.trace(R) - 1) / 2, -1, 1))))
 
 
 def test_map_is_triangulated_from_the_known_poses(gallery, sift_map):
@@ -42,7 +36,7 @@ def test_query_between_gallery_images_is_localized(sim, stretch, sift_map):
         frame = _render(sim, query_pose(stretch, index))
         result = localizer.localize(frame.image, camera_model(CAMERA))
         assert result.success, result.reason
-        dt, dr = _errors(result.world_from_cam, frame.world_from_cam)
+        dt, dr = pose_error(result.world_from_cam, frame.world_from_cam)
         assert dt < 0.25 and dr < 2.0
         assert result.num_inliers >= 30
         assert set(result.seconds) == {"features", "retrieval", "matching", "pnp"}
@@ -84,7 +78,7 @@ def test_confident_pose_stops_matching_early(sim, stretch, sift_map):
     # the best-ranked image alone gives a confident pose: the other four are never matched
     assert early.cluster == every.retrieved[:1] and len(every.cluster) > 1
     assert 20 <= early.num_inliers < every.num_inliers
-    dt, dr = _errors(early.world_from_cam, frame.world_from_cam)
+    dt, dr = pose_error(early.world_from_cam, frame.world_from_cam)
     assert dt < 0.25 and dr < 2.0
 
 
@@ -98,7 +92,7 @@ def test_unmapped_place_and_featureless_image_fail_cleanly(sim, small_town, sift
     frame = _render(sim, (float(x), float(y), float(small_town.route.yaw_rad[-1])))
     result = localizer.localize(frame.image, camera_model(CAMERA))
     if result.success:  # a wrong answer must at least not be near a gallery place by accident
-        assert _errors(result.world_from_cam, frame.world_from_cam)[0] > 0.25
+        assert pose_error(result.world_from_cam, frame.world_from_cam)[0] > 0.25
     else:
         assert result.reason
     # the explicit fall-back answers the best retrieved image's pose, and says so
@@ -122,7 +116,7 @@ def test_pose_prior_retrieval(sim, stretch, gallery, tmp_path):
     prior[:3, 3] += [1.5, -1.0, 0.0]  # a prior a couple of metres off
     result = localizer.localize(frame.image, camera_model(CAMERA), prior)
     assert result.success
-    assert _errors(result.world_from_cam, frame.world_from_cam)[0] < 0.25
+    assert pose_error(result.world_from_cam, frame.world_from_cam)[0] < 0.25
 
 
 def test_pose_prior_retrieval_on_a_map_with_its_own_retrieval(sim, stretch, sift_map):
@@ -143,10 +137,10 @@ def test_pose_prior_retrieval_on_a_map_with_its_own_retrieval(sim, stretch, sift
     assert min(np.linalg.norm(gallery_xy[n] - truth_xy) for n in result.retrieved) < 3.0
     result = prior_only.localize(frame.image, camera_model(CAMERA), frame.world_from_cam)
     assert result.success
-    assert _errors(result.world_from_cam, frame.world_from_cam)[0] < 0.25
+    assert pose_error(result.world_from_cam, frame.world_from_cam)[0] < 0.25
 
 
-def test_bad_query_images_are_clear_errors(sift_map):
+def test_bad_query_images_are_clearpose_error(sift_map):
     localizer = MapLocalizer(sift_map[0])
     cam = camera_model(CAMERA)
     with pytest.raises(LocalizationError, match="320x240"):
@@ -157,7 +151,7 @@ def test_bad_query_images_are_clear_errors(sift_map):
         localizer.localize(np.zeros((240, 320, 3), np.float32), cam)
 
 
-def test_corrupt_map_files_are_clear_errors(sift_map, tmp_path):
+def test_corrupt_map_files_are_clearpose_error(sift_map, tmp_path):
     import shutil
 
     broken = tmp_path / "broken"
@@ -213,14 +207,14 @@ def test_a_rig_is_localized_by_one_generalized_pnp(sim, stretch, sift_map):
     assert result.success and result.generalized, result.reason
     assert all(r.success for r in result.cameras)
     assert result.num_inliers > max(r.num_inliers for r in result.cameras)
-    dt, dr = _errors(result.world_from_rig, world_from_vehicle)
+    dt, dr = pose_error(result.world_from_rig, world_from_vehicle)
     assert dt < 0.25 and dr < 2.0
     assert set(result.seconds) == {"features", "retrieval", "matching", "pnp"}
     # a blind camera: the other one's pose, through its mounting
     black = np.zeros_like(frames[0].image)
     one = localizer.localize_rig([black, frames[1].image], models, mounts)
     assert one.success and not one.generalized and not one.cameras[0].success
-    dt, dr = _errors(one.world_from_rig, world_from_vehicle)
+    dt, dr = pose_error(one.world_from_rig, world_from_vehicle)
     assert dt < 0.25 and dr < 2.0
     blind = localizer.localize_rig([black, black], models, mounts)
     assert not blind.success and "camera 0: only 0 features" in blind.reason

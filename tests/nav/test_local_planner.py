@@ -1,21 +1,15 @@
 import numpy as np
 import pytest
 
+from tests.nav.paths import straight
 from vlocbench.errors import ConfigError
 from vlocbench.nav import LocalPlanner, LocalPlannerConfig, WaypointPath
-
-
-def _straight(length_m=100.0):
-    return WaypointPath(
-        np.stack([np.arange(0, length_m + 1, 2.0), np.zeros(int(length_m / 2) + 1)], 1)
-    )
-
 
 BAND = LocalPlannerConfig(rule="band")
 
 
 def test_paper_rule_targets_the_first_waypoint_at_least_0_9_s_ahead():
-    planner = LocalPlanner(_straight(), target_speed_mps=4.0)
+    planner = LocalPlanner(straight(100.0), target_speed_mps=4.0)
     ahead = []
     for x in np.arange(0.0, 60.0, 0.2):  # drive along at 4 m/s, 20 Hz, 0.3 m off the path
         t = planner.step(np.array([x, 0.3]), 4.0)
@@ -26,7 +20,7 @@ def test_paper_rule_targets_the_first_waypoint_at_least_0_9_s_ahead():
 
 
 def test_paper_rule_searches_again_beyond_3_s_and_takes_the_goal_at_the_end():
-    planner = LocalPlanner(_straight(), target_speed_mps=4.0)
+    planner = LocalPlanner(straight(100.0), target_speed_mps=4.0)
     assert planner.step(np.array([0.0, 0.0]), 0.0).xy[0] == pytest.approx(4.0)
     # the estimate jumps 20 m ahead: the old target is 16 m behind (> 12 m), so the closest
     # waypoint is taken, and the next step moves on from there
@@ -38,7 +32,7 @@ def test_paper_rule_searches_again_beyond_3_s_and_takes_the_goal_at_the_end():
 
 
 def test_target_stays_in_the_lookahead_band():
-    planner = LocalPlanner(_straight(), BAND)
+    planner = LocalPlanner(straight(100.0), BAND)
     speed = 4.0
     near, far = planner.band_m(speed)
     assert (near, far) == pytest.approx((3.6, 12.0))
@@ -57,7 +51,7 @@ def test_target_stays_in_the_lookahead_band():
 
 
 def test_band_has_a_floor_at_rest_and_targets_the_goal_at_the_end():
-    planner = LocalPlanner(_straight(), BAND)
+    planner = LocalPlanner(straight(100.0), BAND)
     near, far = planner.band_m(0.0)
     assert near == pytest.approx(3.0) and far > near
     t = planner.step(np.array([0.0, 0.0]), 0.0)
@@ -95,7 +89,7 @@ def test_bad_config():
 
 
 def test_head_of_a_path():
-    path = _straight(100.0)
+    path = straight(100.0)
     head = path.head(31.0)
     assert head.length_m == 32.0  # up to the first waypoint at or past 31 m
     assert path.head(0.0) is path and path.head(500.0) is path

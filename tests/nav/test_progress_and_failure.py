@@ -1,17 +1,13 @@
 import numpy as np
 import pytest
 
+from tests.nav.paths import straight
 from vlocbench.errors import ConfigError
 from vlocbench.nav import FailureConfig, FailureDetector, ProgressTracker, WaypointPath
 
 
-def _straight(length_m=400.0):
-    x = np.arange(0.0, length_m + 1, 2.0)
-    return WaypointPath(np.stack([x, np.zeros_like(x)], 1))
-
-
 def test_progress_counts_only_near_the_route():
-    tracker = ProgressTracker(_straight())
+    tracker = ProgressTracker(straight(400.0))
     tracker.update(np.array([20.5, 1.0]))
     assert tracker.farthest_s_m == pytest.approx(20.5)
     assert tracker.farthest_index == 10  # waypoint at x = 20, the farthest one reached
@@ -41,7 +37,7 @@ def test_progress_never_jumps_more_than_150_m():
 
 
 def test_progress_finishes_near_the_goal():
-    tracker = ProgressTracker(_straight(100.0))
+    tracker = ProgressTracker(straight(100.0))
     for x in range(0, 100, 5):
         tracker.update(np.array([float(x), 0.0]))
     assert not tracker.finished

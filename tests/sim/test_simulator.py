@@ -32,11 +32,14 @@ def test_staying_on_the_road_is_collision_free_and_teleport_resets(small_sim, sm
 
 def test_traffic_moves_deterministically(small_town):
     def run():
-        sim = Simulator(small_town, Conditions(traffic=Traffic(cars=3, pedestrians=4, seed=2)))
-        start = sim.traffic.car_poses() + sim.traffic.pedestrian_poses()
-        for _ in range(40):
-            sim.step(Control())
-        return np.array(start), np.array(sim.traffic.car_poses() + sim.traffic.pedestrian_poses())
+        with Simulator(
+            small_town, Conditions(traffic=Traffic(cars=3, pedestrians=4, seed=2))
+        ) as sim:
+            start = sim.traffic.car_poses() + sim.traffic.pedestrian_poses()
+            for _ in range(40):
+                sim.step(Control())
+            end = sim.traffic.car_poses() + sim.traffic.pedestrian_poses()
+        return np.array(start), np.array(end)
 
     (s1, e1), (_s2, e2) = run(), run()
     np.testing.assert_array_equal(e1, e2)
@@ -45,30 +48,30 @@ def test_traffic_moves_deterministically(small_town):
 
 
 def test_reset_restarts_time_and_traffic(small_town):
-    sim = Simulator(small_town, Conditions(traffic=Traffic(cars=3, pedestrians=2, seed=4)))
-    x, y = small_town.route.waypoints_xy[0]
-    yaw = float(small_town.route.yaw_rad[0])
+    with Simulator(small_town, Conditions(traffic=Traffic(cars=3, pedestrians=2, seed=4))) as sim:
+        x, y = small_town.route.waypoints_xy[0]
+        yaw = float(small_town.route.yaw_rad[0])
 
-    def drive():
-        state = sim.reset(float(x), float(y), yaw)
-        assert state.time_s == 0.0 and state.speed_mps == 0.0
-        for _ in range(30):
-            sim.step(Control(throttle=0.3))
-        return sim.state, np.array(sim.traffic.car_poses() + sim.traffic.pedestrian_poses())
+        def drive():
+            state = sim.reset(float(x), float(y), yaw)
+            assert state.time_s == 0.0 and state.speed_mps == 0.0
+            for _ in range(30):
+                sim.step(Control(throttle=0.3))
+            return sim.state, np.array(sim.traffic.car_poses() + sim.traffic.pedestrian_poses())
 
-    (a_state, a_traffic), (b_state, b_traffic) = drive(), drive()
-    assert a_state == b_state and a_state.time_s == pytest.approx(1.5)
-    np.testing.assert_array_equal(a_traffic, b_traffic)
+        (a_state, a_traffic), (b_state, b_traffic) = drive(), drive()
+        assert a_state == b_state and a_state.time_s == pytest.approx(1.5)
+        np.testing.assert_array_equal(a_traffic, b_traffic)
 
 
 def test_a_traffic_car_is_a_collision_target(small_town):
-    sim = Simulator(small_town, Conditions(traffic=Traffic(cars=1, seed=0)))
-    x, y, yaw = sim.traffic.car_poses()[0]
-    sim.teleport(x - 8 * np.cos(yaw), y - 8 * np.sin(yaw), yaw)
-    categories = set()
-    for _ in range(100):
-        categories |= {e.category for e in sim.step(Control(throttle=1.0)).collisions}
-    assert "car" in categories
+    with Simulator(small_town, Conditions(traffic=Traffic(cars=1, seed=0))) as sim:
+        x, y, yaw = sim.traffic.car_poses()[0]
+        sim.teleport(x - 8 * np.cos(yaw), y - 8 * np.sin(yaw), yaw)
+        categories = set()
+        for _ in range(100):
+            categories |= {e.category for e in sim.step(Control(throttle=1.0)).collisions}
+        assert "car" in categories
 
 
 def test_more_traffic_than_the_scene_holds_is_refused_and_changes_nothing(small_sim):
