@@ -73,9 +73,9 @@ def test_a_whole_localizer_from_the_tests_drives_an_episode_through_the_runner(t
     assert rows.keys() == {"mine", "truth"}
     assert not (tmp_path / "cache").exists()  # neither needs a gallery or a map
     mine, truth = rows["mine"].metrics, rows["truth"].metrics
-    assert mine["failures"] == truth["failures"] == 0 and mine["completed"]
+    assert mine.failures == truth.failures == 0 and mine.completed
     # the EKF follows the answers: half a metre off to the side, against none for the truth
-    assert truth["tracking_error_mean_m"] < 0.1 < 0.3 < mine["tracking_error_mean_m"] < 0.7
+    assert truth.tracking_error_mean_m < 0.1 < 0.3 < mine.tracking_error_mean_m < 0.7
     # keyed by path and arguments: other arguments are other episodes
     other = _experiment(tmp_path, [{"name": "mine", "kind": PLUGIN, "args": {"offset_m": 1.0}}])
     assert {t.key for t in other.tasks()}.isdisjoint(t.key for t in plan.tasks())

@@ -1,10 +1,13 @@
 import dataclasses
+import json
 
 import numpy as np
 import pytest
 
 from tests.bench.fakes import synthetic_result
 from vlocbench.bench.metrics import (
+    EpisodeMetrics,
+    Metric,
     confident_wrong,
     drift_segments,
     episode_metrics,
@@ -15,6 +18,7 @@ from vlocbench.bench.metrics import (
     pooled_drift,
     recall,
 )
+from vlocbench.errors import ConfigError, UnknownNameError
 from vlocbench.geometry import make_pose, planar_pose, pose_error, rot_x
 
 
@@ -123,3 +127,59 @@ def test_place_recall_counts_a_retrieved_image_within_the_distance_among_the_fir
     r = place_recall(distances)  # N-major: @1 (5, 10, 25 m), @5 (...), @10 (...)
     assert r == pytest.approx([1 / 3, 1 / 3, 1 / 3, 1 / 3, 2 / 3, 2 / 3, 2 / 3, 2 / 3, 2 / 3])
     assert all(np.isnan(place_recall([[], []])))
+
+
+def test_stored_metrics_read_back_typed_and_old_rows_fill_in():
+    m = episode_metrics(synthetic_result(2))
+    stored = json.loads(json.dumps(dataclasses.asdict(m)))  # as the store keeps them
+    back = EpisodeMetrics.from_stored(stored)
+    assert json.dumps(dataclasses.asdict(back)) == json.dumps(dataclasses.asdict(m))  # NaN too
+    assert isinstance(back.failure_sites_xy[0], tuple) and back.failure_causes == ("collision",) * 2
+    # a row of an earlier version: no place recall yet, and a metric stored as a field then
+    old = {k: v for k, v in stored.items() if k not in ("place_recall", "extra")}
+    old["mean_segment_m"] = 33.0
+    back = EpisodeMetrics.from_stored(old)
+    assert back.place_recall == () and back.extra == {"mean_segment_m": 33.0}
+
+
+@pytest.fixture
+def declared():
+    """The declared metrics as they were before the test."""
+    from vlocbench.bench.metrics import METRICS
+
+    before = dict(METRICS)
+    yield
+    METRICS.clear()
+    METRICS.update(before)
+
+
+def test_a_metric_is_one_declaration(tmp_path, declared):
+    """Declared once, a metric is computed for every stored episode, combined per cell as it
+    says, and shown in the report's table of declared metrics."""
+    from tests.bench.fakes import ILL_SPEC, run_fake_plans
+    from vlocbench.bench import metrics
+    from vlocbench.bench.experiment import load_experiment
+    from vlocbench.bench.report import write_report
+
+    metrics.declare_metric(
+        Metric(
+            name="reinits_x10",
+            episode=lambda r: 10.0 * r.failures,
+            header="10 x failures",
+            combine=max,
+            digits=0,
+        )
+    )
+    with pytest.raises(ConfigError, match="declared already"):
+        metrics.declare_metric(Metric(name="queries", episode=len, header="q"))
+    with pytest.raises(UnknownNameError, match=r"metric\.kinds"):
+        metrics.declare_metric(Metric(name="x", episode=len, header="x", kinds=("ground",)))
+    run_fake_plans(tmp_path, load_experiment({**ILL_SPEC, "sweep": {"illumination.k": [0, 6]}}))
+    files = write_report(tmp_path, examples=False)
+    # the fakes: failure drives of repetition 0 fail 0 times, odometry drives 3 times
+    summary = files.summary
+    assert summary.cell("town10", "sift-vlad", "illumination.k=6").extra["reinits_x10"] == 0.0
+    assert summary.cell("town10", "odometry", "illumination.k=6").extra["reinits_x10"] == 30.0
+    md = files.markdown.read_text()
+    assert "town10: declared metrics" in md and "| 10 x failures |" in md
+    assert "| odometry only | all | 100 | 0.10 | 30 |" in md

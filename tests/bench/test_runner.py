@@ -23,9 +23,9 @@ def test_experiment_runs_end_to_end_and_resumes(tiny):
     with ResultStore(root / "out", "tiny") as store:
         rows = store.rows()
     recall = [r for r in rows if r.kind == "recall"]
-    assert len(recall) == 2 and all(r.metrics["queries"] > 10 for r in recall)
-    assert all(r.metrics["recall"][3] > 0.5 for r in recall)  # it localizes on its own map
-    assert all(r.metrics["place_recall"][-1] > 0.9 for r in recall)  # Recall@10 within 25 m
+    assert len(recall) == 2 and all(r.metrics.queries > 10 for r in recall)
+    assert all(r.metrics.recall[3] > 0.5 for r in recall)  # it localizes on its own map
+    assert all(r.metrics.place_recall[-1] > 0.9 for r in recall)  # Recall@10 within 25 m
     assert {r.config["setup"]["conditions"]["illumination"]["k"] for r in recall} == {0.0, 6.0}
     again = run_experiment(load_experiment(root / "tiny.yaml"), progress=False)
     assert (again.skipped, again.finished) == (5, 0)

@@ -1,3 +1,4 @@
+import dataclasses
 import errno
 import os
 import signal
@@ -11,18 +12,30 @@ import numpy as np
 import pytest
 
 from tests.bench.fakes import synthetic_result
+from vlocbench.bench.metrics import episode_metrics
 from vlocbench.bench.store import DB_FILE, EpisodeRow, ResultStore, StoreError
 
 
 def _row(key, status="ok"):
     ok = status == "ok"
+    metrics = dataclasses.replace(
+        episode_metrics(synthetic_result(1)), ct_mean_s=float("nan"), recall=(0.5, float("inf"))
+    )
     return EpisodeRow(
-        key=key, kind="failure", town="town10", method="sift", setup="k=0", repetition=0, seed=0,
-        config={"a": 1}, status=status, error=None if ok else "boom",
-        metrics={"failures": 1, "ct_mean_s": float("nan"), "recall": [0.5, float("inf")]}
-        if ok else None,
-        wall_s=1.5, attempts=1,
-    )  # fmt: skip
+        key=key,
+        kind="failure",
+        town="town10",
+        method="sift",
+        setup="k=0",
+        repetition=0,
+        seed=0,
+        config={"a": 1},
+        status=status,
+        error=None if ok else "boom",
+        metrics=metrics if ok else None,
+        wall_s=1.5,
+        attempts=1,
+    )
 
 
 def test_write_read_and_resume_keys(tmp_path):
@@ -34,7 +47,7 @@ def test_write_read_and_resume_keys(tmp_path):
         rows = store.rows()
         assert [(r.key, r.status) for r in rows] == [("a", "ok"), ("b", "error")]
         # NaN and infinities are stored as null (strict JSON) and read back as NaN
-        assert np.isnan(rows[0].metrics["ct_mean_s"]) and np.isnan(rows[0].metrics["recall"][1])
+        assert np.isnan(rows[0].metrics.ct_mean_s) and np.isnan(rows[0].metrics.recall[1])
         assert store.db.execute(
             "SELECT json_extract(metrics, '$.ct_mean_s') IS NULL FROM episodes WHERE key='a'"
         ).fetchone() == (1,)
@@ -64,7 +77,7 @@ def test_rows_stored_with_nan_before_strict_json_are_rewritten_on_open(tmp_path)
         assert store.db.execute("SELECT spec FROM runs").fetchall() == [
             ('{"name": "exp", "x": null}',)
         ]
-        assert np.isnan(store.rows()[0].metrics["ct_mean_s"])
+        assert np.isnan(store.rows()[0].metrics.ct_mean_s)
 
 
 def test_another_experiments_folder_and_a_busy_folder_are_refused(tmp_path):

@@ -15,7 +15,7 @@ import time
 import traceback
 from collections import deque
 from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from typing import Any
 
 from vlocbench.bench.experiment import EpisodeTask
@@ -59,7 +59,7 @@ def _row(task: EpisodeTask, outcome: EpisodeOutcome | None, error: str | None,
         "episode": to_dict(task.episode),
         "key": task.key,
     }
-    metrics = asdict(episode_metrics(outcome.result)) if outcome else None
+    metrics = episode_metrics(outcome.result) if outcome else None
     return EpisodeRow(
         key=task.key,
         kind=task.kind,

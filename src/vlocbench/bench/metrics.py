@@ -10,16 +10,21 @@ pose returned, but beyond (5 m, 10 deg)): these, not misses, crash a car.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from dataclasses import dataclass
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field, fields
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
 
 from vlocbench.bench.records import EpisodeResult, per_km
+from vlocbench.config import require_one_of
+from vlocbench.errors import ConfigError
 from vlocbench.geometry import wrap_angle
 from vlocbench.nav import Drift
 
+EpisodeKind = Literal["failure", "recall", "baseline"]
+EPISODE_KINDS = ("failure", "recall", "baseline")
 # (position m, yaw deg): the paper's three plus a coarse (20 m, 180 deg) "right street" level
 RECALL_THRESHOLDS: tuple[tuple[float, float], ...] = (
     (0.25, 2.0),
@@ -130,9 +135,44 @@ def pooled_drift(segments: Sequence[Sequence[float]]) -> PooledDrift:
     )
 
 
+def nanmean(values: Sequence[float]) -> float:
+    """The mean of the finite values; NaN when there are none."""
+    finite = [v for v in values if v is not None and np.isfinite(v)]
+    return float(np.mean(finite)) if finite else float("nan")
+
+
 @dataclass(frozen=True)
+class Metric:
+    """A metric in one declaration: its value per episode, the drives of a cell it is taken from,
+    how a cell's repetitions combine, and the column of the report's table of declared metrics
+    that shows it. Declared with :func:`declare_metric`, it is computed for every episode stored
+    from then on (stored in ``EpisodeMetrics.extra`` under ``name``); episodes stored before have
+    none (NaN)."""
+
+    name: str  # the stored key, with its unit as a suffix (``_m``, ``_s``, ``_per_km``)
+    episode: Callable[[EpisodeResult], float]
+    header: str  # the report's column header
+    kinds: tuple[EpisodeKind, ...] = ("failure", "baseline")  # the drives it is taken from
+    combine: Callable[[Sequence[float]], float] = nanmean
+    digits: int = 1
+
+
+METRICS: dict[str, Metric] = {}
+
+
+def declare_metric(metric: Metric) -> Metric:
+    """Add ``metric`` to :data:`METRICS` (a name declared twice is an error)."""
+    if metric.name in METRICS or metric.name in EPISODE_FIELDS:
+        raise ConfigError("metric.name", f"{metric.name!r} is declared already")
+    for kind in metric.kinds:
+        require_one_of(kind, EPISODE_KINDS, "metric.kinds")
+    METRICS[metric.name] = metric
+    return metric
+
+
+@dataclass(frozen=True, kw_only=True)
 class EpisodeMetrics:
-    """Per-episode figures stored with every result (plain numbers and lists: JSON-ready)."""
+    """Per-episode figures stored with every result (plain numbers and tuples: JSON-ready)."""
 
     route_length_m: float
     route_covered_m: float  # up to the farthest point reached (the whole route if completed)
@@ -143,9 +183,7 @@ class EpisodeMetrics:
     failure_sites_s_m: tuple[float, ...]  # arc length along the route where each failure happened
     failure_sites_xy: tuple[tuple[float, float], ...]  # where the car truly was, world m
     failure_causes: tuple[str, ...]  # of every failure, a time-out that counts last
-    mean_segment_m: float  # mean length driven between failures (the whole route if none)
     tracking_error_mean_m: float
-    final_drift_m: float
     drift_segments: tuple[tuple[float, float, float], ...]  # see drift_segments()
     queries: int
     recall: tuple[float, ...]  # raw localization, 6-DoF errors, at RECALL_THRESHOLDS
@@ -157,13 +195,40 @@ class EpisodeMetrics:
     ct_mean_s: float  # mean computation time per query (NaN without queries)
     sim_time_s: float
     wall_time_s: float
+    extra: dict[str, float] = field(default_factory=dict)  # the declared METRICS, by name
+
+    @classmethod
+    def from_stored(cls, stored: Mapping[str, Any]) -> EpisodeMetrics:
+        """Read back from the store's JSON: lists become tuples; a field that an earlier version
+        did not store is NaN (numbers) or empty (tuples); a stored key that is no field, a metric
+        declared since, goes to ``extra``."""
+        values: dict[str, Any] = {"extra": dict(stored.get("extra") or {})}
+        for f in fields(cls):
+            if f.name == "extra":
+                continue
+            if f.name in stored:
+                values[f.name] = _tuples(stored[f.name])
+            else:
+                values[f.name] = _MISSING[str(f.type).split("[")[0]]
+        for name, value in stored.items():
+            if name not in EPISODE_FIELDS and name != "extra":
+                values["extra"][name] = value
+        return cls(**values)
+
+
+def _tuples(value: Any) -> Any:
+    return tuple(_tuples(v) for v in value) if isinstance(value, list | tuple) else value
+
+
+# what a field an older version did not store reads back as, by its type
+_MISSING: dict[str, Any] = {"float": float("nan"), "int": 0, "bool": True, "tuple": ()}
+EPISODE_FIELDS = frozenset(f.name for f in fields(EpisodeMetrics))
 
 
 def episode_metrics(result: EpisodeResult) -> EpisodeMetrics:
     locs = result.localizations
     tr = result.trajectory
     ekf_yaw_err = np.degrees(np.abs(wrap_angle(tr.ekf_yaw_rad - tr.true_yaw_rad)))
-    segments = [s.length_m for s in result.segments]
     pos3d = np.array([x.position_error_3d_m for x in locs])
     rot = np.array([x.rotation_error_deg for x in locs])
     return EpisodeMetrics(
@@ -176,9 +241,7 @@ def episode_metrics(result: EpisodeResult) -> EpisodeMetrics:
         failure_sites_s_m=tuple(r.resume_s_m for r in result.reinitializations),
         failure_sites_xy=tuple((r.x_m, r.y_m) for r in result.reinitializations),
         failure_causes=result.failure_causes,
-        mean_segment_m=float(np.mean(segments)) if segments else result.route_length_m,
         tracking_error_mean_m=result.tracking_error_mean_m,
-        final_drift_m=result.final_drift_m,
         drift_segments=drift_segments(result),
         queries=len(locs),
         recall=recall(pos3d, rot),
@@ -192,7 +255,32 @@ def episode_metrics(result: EpisodeResult) -> EpisodeMetrics:
         ct_mean_s=float(np.mean([x.compute_time_s for x in locs])) if locs else float("nan"),
         sim_time_s=result.sim_time_s,
         wall_time_s=result.wall_time_s,
+        extra={m.name: float(m.episode(result)) for m in METRICS.values()},
     )
+
+
+def _mean_stretch_m(result: EpisodeResult) -> float:
+    segments = [s.length_m for s in result.segments]
+    return float(np.mean(segments)) if segments else result.route_length_m
+
+
+# declared metrics: what the summary and the report show of them needs nothing more
+declare_metric(
+    Metric(
+        name="mean_segment_m",
+        episode=_mean_stretch_m,
+        header="distance between failures (m)",
+        digits=0,
+    )
+)
+declare_metric(
+    Metric(
+        name="final_drift_m",
+        episode=lambda r: r.final_drift_m,
+        header="EKF error at the goal (m)",
+        digits=2,
+    )
+)
 
 
 @dataclass(frozen=True)

@@ -25,12 +25,13 @@ import sqlite3
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from vlocbench.bench.metrics import EpisodeMetrics
 from vlocbench.bench.records import EpisodeResult
 from vlocbench.errors import MachineError, VlocbenchError
 
@@ -72,7 +73,7 @@ class EpisodeRow:
     config: dict[str, Any]
     status: str  # "ok" or "error"
     error: str | None
-    metrics: dict[str, Any] | None
+    metrics: EpisodeMetrics | None  # None: the episode ended in an error
     wall_s: float | None
     attempts: int
 
@@ -113,7 +114,7 @@ def _episode_row(
     return EpisodeRow(
         key=key, kind=kind, town=town, method=method, setup=setup, repetition=repetition,
         seed=seed, config=json.loads(config), status=status, error=error,
-        metrics=_nan_for_null(json.loads(metrics)) if metrics else None, wall_s=wall_s,
+        metrics=EpisodeMetrics.from_stored(_nan_for_null(json.loads(metrics))) if metrics else None, wall_s=wall_s,
         attempts=attempts,
     )  # fmt: skip
 
@@ -298,7 +299,7 @@ class ResultStore:
                 "key": row.key, "kind": row.kind, "town": row.town, "method": row.method,
                 "setup": row.setup, "repetition": row.repetition, "seed": row.seed,
                 "config": strict_json(row.config), "status": row.status, "error": row.error,
-                "metrics": None if row.metrics is None else strict_json(row.metrics),
+                "metrics": None if row.metrics is None else strict_json(asdict(row.metrics)),
                 "wall_s": row.wall_s, "attempts": row.attempts, "finished": time.time(),
             }  # fmt: skip
             db.execute(

@@ -13,8 +13,6 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
-import numpy as np
-
 from vlocbench.bench.experiment import (
     BASELINE_CONDITIONS,
     ExperimentPlan,
@@ -23,12 +21,14 @@ from vlocbench.bench.experiment import (
     baseline_drive,
 )
 from vlocbench.bench.metrics import (
+    METRICS,
     FailureRate,
     Fragmentation,
     PooledDrift,
     failure_rate,
     failure_rate_by_cause,
     fragmentation,
+    nanmean,
     pooled_drift,
 )
 from vlocbench.bench.store import EpisodeRow
@@ -54,6 +54,7 @@ class Cell:
     ct_s: float  # mean computation time per query (NaN: none)
     fragmentation: Fragmentation | None
     tracking_error_m: float
+    extra: dict[str, float]  # the declared metrics (metrics.METRICS), each combined as declared
     drift: PooledDrift  # the EKF's at the end of failure-free stretches of the failure episodes
     sites_xy: tuple[tuple[float, float], ...]  # failure sites of all repetitions
     errors: int  # episodes that ended in an error (not counted above)
@@ -90,11 +91,6 @@ class Summary:
         return None
 
 
-def _mean(values: Sequence[float]) -> float:
-    finite = [v for v in values if v is not None and np.isfinite(v)]
-    return float(np.mean(finite)) if finite else float("nan")
-
-
 def _stored_cells(
     plan: ExperimentPlan, drives: Sequence[tuple[str, dict[str, Any]]], row: EpisodeRow
 ) -> list[tuple[str, str, str]]:
@@ -122,29 +118,39 @@ def _cell(key: tuple[str, str, str], group: list[EpisodeRow], errors: int) -> Ce
     """The figures of one (town, method, setup) from its episodes' stored metrics."""
     fail = [r.metrics for r in group if r.kind in ("failure", "baseline") and r.metrics]
     rec = [r.metrics for r in group if r.kind == "recall" and r.metrics]
-    sites = [s for m in fail for s in m["failure_sites_s_m"]]
+    sites = [s for m in fail for s in m.failure_sites_s_m]
     town, method, setup = key
     return Cell(
         town=town,
         method=method,
         setup=setup,
-        failure=failure_rate([m["failures_per_km"] for m in fail]) if fail else None,
+        failure=failure_rate([m.failures_per_km for m in fail]) if fail else None,
         failure_by_cause=failure_rate_by_cause(
-            [m["failure_causes"] for m in fail], [m["route_covered_m"] for m in fail]
+            [m.failure_causes for m in fail], [m.route_covered_m for m in fail]
         ),
-        timeouts=sum(not m["completed"] for m in fail),
-        recall=tuple(rec[0]["recall"]) if rec else None,
-        recall_planar=tuple(rec[0]["recall_planar"]) if rec else None,
-        confident_wrong=rec[0]["confident_wrong"] if rec else float("nan"),
+        timeouts=sum(not m.completed for m in fail),
+        recall=rec[0].recall if rec else None,
+        recall_planar=rec[0].recall_planar if rec else None,
+        confident_wrong=rec[0].confident_wrong if rec else float("nan"),
         # episodes stored before place recognition was scored have none
-        place_recall=tuple(rec[0]["place_recall"]) if rec and "place_recall" in rec[0] else None,
-        recall_ekf=tuple(rec[0]["recall_ekf"]) if rec else None,
-        lock_losses_per_km=rec[0]["lock_losses_per_km"] if rec else float("nan"),
-        ct_s=_mean([r.metrics["ct_mean_s"] for r in group if r.metrics]),
+        place_recall=rec[0].place_recall or None if rec else None,
+        recall_ekf=rec[0].recall_ekf if rec else None,
+        lock_losses_per_km=rec[0].lock_losses_per_km if rec else float("nan"),
+        ct_s=nanmean([r.metrics.ct_mean_s for r in group if r.metrics]),
         fragmentation=fragmentation(sites) if fail else None,
-        tracking_error_m=_mean([m["tracking_error_mean_m"] for m in fail]),
-        drift=pooled_drift([seg for m in fail for seg in m["drift_segments"]]),
-        sites_xy=tuple(tuple(xy) for m in fail for xy in m["failure_sites_xy"]),
+        tracking_error_m=nanmean([m.tracking_error_mean_m for m in fail]),
+        extra={
+            name: metric.combine(
+                [
+                    r.metrics.extra.get(name, float("nan"))
+                    for r in group
+                    if r.kind in metric.kinds and r.metrics
+                ]
+            )
+            for name, metric in METRICS.items()
+        },
+        drift=pooled_drift([seg for m in fail for seg in m.drift_segments]),
+        sites_xy=tuple(tuple(xy) for m in fail for xy in m.failure_sites_xy),
         errors=errors,
         keys=frozenset(r.key for r in group),
     )

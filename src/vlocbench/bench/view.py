@@ -84,6 +84,8 @@ def record_episode(output_dir: str | Path, row: EpisodeRow, path: str | Path,
                    images: bool = False, spawn: bool = False) -> Path:  # fmt: skip
     """Write the rerun recording of ``row`` (an episode stored in ``output_dir``) to ``path``;
     ``spawn`` also opens the viewer."""
+    if row.metrics is None:
+        raise StoreError(f"episode {row.key} ended in an error: it has no drive to record")
     rr = _rerun()
     output_dir, path = Path(output_dir), Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -95,9 +97,7 @@ def record_episode(output_dir: str | Path, row: EpisodeRow, path: str | Path,
     rec.save(str(path))
     rec.log("/", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
     town = town_named(row.config["town"])
-    _log_town(
-        rr, rec, town, route_named(row.config["town"], float(row.metrics["route_length_m"])).xy
-    )
+    _log_town(rr, rec, town, route_named(row.config["town"], row.metrics.route_length_m).xy)
     for name, prefix, colour in (("truth", "true", (40, 120, 230)), ("ekf", "ekf", (240, 140, 30))):
         xyz = np.c_[tr[f"{prefix}_x_m"], tr[f"{prefix}_y_m"], np.full(len(tr["time_s"]), 0.1)]
         rec.log(f"{name}/path", rr.LineStrips3D([xyz], colors=[colour]), static=True)
@@ -110,9 +110,9 @@ def record_episode(output_dir: str | Path, row: EpisodeRow, path: str | Path,
                 tr[f"{prefix}_x_m"][k], tr[f"{prefix}_y_m"][k], tr[f"{prefix}_yaw_rad"][k]
             )
             rec.log(name, rr.Transform3D(translation=pose[:3, 3], mat3x3=pose[:3, :3]))
-    sites = row.metrics.get("failure_sites_xy", [])
+    sites = row.metrics.failure_sites_xy
     if sites:
-        causes = list(row.metrics.get("failure_causes", []))  # one per failure, in order
+        causes = list(row.metrics.failure_causes)  # one per failure, in order
         points = rr.Points3D([(x, y, 1.0) for x, y in sites], radii=1.5, colors=[WRONG],
                              labels=causes if len(causes) == len(sites) else None)  # fmt: skip
         rec.log("failures", points, static=True)

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from vlocbench.bench.experiment import ExperimentPlan, plan_from_stored
+from vlocbench.bench.metrics import METRICS
 from vlocbench.bench.report.comparison import paper_comparison_tables
 from vlocbench.bench.report.figures import (
     computation_time_figure,
@@ -22,6 +23,7 @@ from vlocbench.bench.report.page import write_page
 from vlocbench.bench.report.tables import (
     Table,
     cause_table,
+    declared_metrics_table,
     drift_table,
     failure_table,
     fragmentation_table,
@@ -50,28 +52,72 @@ def report_tables(summary: Summary) -> list[tuple[str, Table]]:
     out = []
     for town in summary.towns:
         name = summary.town_names[town]
-        out.append((f"{name}: failure rate F (failures/km, mean [bootstrap 95 % CI] over "
-                    f"{summary.spec.repetitions} repetitions) and computation time per query",
-                    failure_table(summary, town)))  # fmt: skip
-        out.append((f"{name}: failure rate by cause (failures/km; the paper counts collisions) "
-                    "and episodes that ran out of time", cause_table(summary, town)))  # fmt: skip
+        out.append(
+            (
+                f"{name}: failure rate F (failures/km, mean [bootstrap 95 % CI] over "
+                f"{summary.spec.repetitions} repetitions) and computation time per query",
+                failure_table(summary, town),
+            )
+        )
+        out.append(
+            (
+                f"{name}: failure rate by cause (failures/km; the paper counts collisions) "
+                "and episodes that ran out of time",
+                cause_table(summary, town),
+            )
+        )
         if summary.spec.recall and summary.spec.methods:
-            out.append((f"{name}: recall (%) at (0.25 m, 2°) / (0.5 m, 5°) / (5 m, 10°) on 6-DoF "
-                        "errors, ground-truth drive, raw localization (share of answers confident "
-                        "and wrong: beyond (5 m, 10°))", recall_table(summary, town)))  # fmt: skip
-            out.append((f"{name}: place recognition alone, Recall@1 / @5 / @10 (%) of a retrieved "
-                        "gallery image within 5, 10 and 25 m, same drive",
-                        place_recall_table(summary, town)))  # fmt: skip
-            out.append((f"{name}: recall (%) on planar (x, y, yaw) errors, same drive",
-                        recall_table(summary, town, "planar")))  # fmt: skip
-            out.append((f"{name}: recall (%) of the fused (EKF) pose at every step, same drive "
-                        "(lock losses per km: the EKF reset at the truth)",
-                        recall_table(summary, town, "fused")))  # fmt: skip
+            out.append(
+                (
+                    f"{name}: recall (%) at (0.25 m, 2°) / (0.5 m, 5°) / (5 m, 10°) on 6-DoF "
+                    "errors, ground-truth drive, raw localization (share of answers confident "
+                    "and wrong: beyond (5 m, 10°))",
+                    recall_table(summary, town),
+                )
+            )
+            out.append(
+                (
+                    f"{name}: place recognition alone, Recall@1 / @5 / @10 (%) of a retrieved "
+                    "gallery image within 5, 10 and 25 m, same drive",
+                    place_recall_table(summary, town),
+                )
+            )
+            out.append(
+                (
+                    f"{name}: recall (%) on planar (x, y, yaw) errors, same drive",
+                    recall_table(summary, town, "planar"),
+                )
+            )
+            out.append(
+                (
+                    f"{name}: recall (%) of the fused (EKF) pose at every step, same drive "
+                    "(lock losses per km: the EKF reset at the truth)",
+                    recall_table(summary, town, "fused"),
+                )
+            )
         if summary.spec.baseline:
-            out.append((f"{name}: wheel-odometry drift of the EKF, at the end of each failure-free "
-                        "stretch over its length", drift_table(summary, town)))  # fmt: skip
-        out.append((f"{name}: where failures happen (25 m stretches of the route) and the "
-                    "mean tracking error", fragmentation_table(summary, town)))  # fmt: skip
+            out.append(
+                (
+                    f"{name}: wheel-odometry drift of the EKF, at the end of each failure-free "
+                    "stretch over its length",
+                    drift_table(summary, town),
+                )
+            )
+        if METRICS:
+            out.append(
+                (
+                    f"{name}: declared metrics (vlocbench.bench.metrics.METRICS), over the drives "
+                    "and repetitions each declares",
+                    declared_metrics_table(summary, town),
+                )
+            )
+        out.append(
+            (
+                f"{name}: where failures happen (25 m stretches of the route) and the "
+                "mean tracking error",
+                fragmentation_table(summary, town),
+            )
+        )
     return out + paper_comparison_tables(summary)
 
 

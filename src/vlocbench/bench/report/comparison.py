@@ -78,26 +78,32 @@ def paper_comparison_tables(summary: Summary) -> list[tuple[str, Table]]:
     return out
 
 
-def _paper_failure_table(summary: Summary, town: str, table: PaperTable,
-                         ours_levels: list[Any]) -> tuple[str, Table]:  # fmt: skip
+def _paper_failure_table(
+    summary: Summary, town: str, table: PaperTable, ours_levels: list[Any]
+) -> tuple[str, Table]:
     name, paper = summary.town_names[town], paper_results()
     shared = [lv for lv in table.levels if lv in ours_levels]
     header = ["source", "method", *(level_text(lv) for lv in shared)]
     rows = []
     for method in summary.methods:
         f, _ = ours_per_setup(summary, town, method)
-        rows.append(["vlocbench", method_label(method),
-                     *(fmt(f[ours_levels.index(lv)]) for lv in shared)])  # fmt: skip
+        rows.append(
+            ["vlocbench", method_label(method), *(fmt(f[ours_levels.index(lv)]) for lv in shared)]
+        )
     for method, f in table.failure_rate[name].items():
         rows.append(["paper", method, *(fmt(f[table.levels.index(lv)]) for lv in shared)])
-    rows.append(["paper", "odometry only",
-                 *(fmt(paper.odometry_failure_rate[name]) for _ in shared)])  # fmt: skip
-    return (f"{name}: failure rate F (failures/km) beside the paper's ({paper.citation})",
-            (header, rows))  # fmt: skip
+    rows.append(
+        ["paper", "odometry only", *(fmt(paper.odometry_failure_rate[name]) for _ in shared)]
+    )
+    return (
+        f"{name}: failure rate F (failures/km) beside the paper's ({paper.citation})",
+        (header, rows),
+    )
 
 
-def _paper_recall_table(summary: Summary, town: str, table: PaperTable,
-                        ours_levels: list[Any]) -> tuple[str, Table]:  # fmt: skip
+def _paper_recall_table(
+    summary: Summary, town: str, table: PaperTable, ours_levels: list[Any]
+) -> tuple[str, Table]:
     name = summary.town_names[town]
     shared = [lv for lv in table.recall_levels if lv in ours_levels]
     header = ["source", "method", *(level_text(lv) for lv in shared)]
@@ -106,19 +112,25 @@ def _paper_recall_table(summary: Summary, town: str, table: PaperTable,
         _, t1 = ours_per_setup(summary, town, method)
         rows.append(["vlocbench", method, *(fmt(t1[ours_levels.index(lv)]) for lv in shared)])
     for method, t1 in table.recall_t1[name].items():
-        rows.append(["paper", method,
-                     *(fmt(t1[table.recall_levels.index(lv)]) for lv in shared)])  # fmt: skip
+        rows.append(["paper", method, *(fmt(t1[table.recall_levels.index(lv)]) for lv in shared)])
     return f"{name}: T1 recall (%, 6-DoF, ground-truth drive) beside the paper's", (header, rows)
 
 
-def _paper_shape_table(summary: Summary, town: str, table: PaperTable,
-                       ours_levels: list[Any]) -> tuple[str, Table]:  # fmt: skip
+def _paper_shape_table(
+    summary: Summary, town: str, table: PaperTable, ours_levels: list[Any]
+) -> tuple[str, Table]:
     name = summary.town_names[town]
     odo_cell = baseline_cell(summary, town)
     odo = odo_cell.failure.mean if odo_cell and odo_cell.failure else float("nan")
     paper_odo = paper_results().odometry_failure_rate[name]
-    header = ["source", "method", "F easiest", "Spearman(F, level)", "F reaches odometry at",
-              "F above odometry up to T1 (%)"]  # fmt: skip
+    header = [
+        "source",
+        "method",
+        "F easiest",
+        "Spearman(F, level)",
+        "F reaches odometry at",
+        "F above odometry up to T1 (%)",
+    ]
     rows = []
     for method in (m for m in summary.methods if m != BASELINE):
         f, t1 = ours_per_setup(summary, town, method)
@@ -126,10 +138,14 @@ def _paper_shape_table(summary: Summary, town: str, table: PaperTable,
     for method, f in table.failure_rate[name].items():
         t1_by_level = dict(zip(table.recall_levels, table.recall_t1.get(name, {}).get(method, ())))
         t1 = [t1_by_level.get(lv, float("nan")) for lv in table.levels]
-        rows.append(["paper", method,
-                     *_shape_cells(shape(f, paper_odo, None, t1), list(table.levels))])  # fmt: skip
-    return (f"{name}: shape of F over the levels, ours (odometry only {fmt(odo)}/km) and the "
-            f"paper's ({fmt(paper_odo)}/km)", (header, rows))  # fmt: skip
+        rows.append(
+            ["paper", method, *_shape_cells(shape(f, paper_odo, None, t1), list(table.levels))]
+        )
+    return (
+        f"{name}: shape of F over the levels, ours (odometry only {fmt(odo)}/km) and the "
+        f"paper's ({fmt(paper_odo)}/km)",
+        (header, rows),
+    )
 
 
 def level_text(level: Any) -> str:
@@ -140,5 +156,9 @@ def level_text(level: Any) -> str:
 
 def _shape_cells(sh: Any, levels: Sequence[Any]) -> list[str]:
     reach = "never" if sh.odometry_level is None else level_text(levels[sh.odometry_level])
-    return [fmt(sh.f_easiest), fmt(sh.rank_correlation, 2), reach,
-            fmt(sh.worse_than_odometry_below_t1)]  # fmt: skip
+    return [
+        fmt(sh.f_easiest),
+        fmt(sh.rank_correlation, 2),
+        reach,
+        fmt(sh.worse_than_odometry_below_t1),
+    ]

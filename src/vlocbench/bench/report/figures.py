@@ -59,8 +59,9 @@ def failure_figure(summary: Summary, town: str, path: Path) -> Path:
         if method == BASELINE:
             ax.plot(x, mean, "--", color="0.4", label="odometry only")
             continue
-        ax.errorbar(x, mean, yerr=[mean - low, high - mean], fmt="o-", color=color, capsize=3,
-                    label=method)  # fmt: skip
+        ax.errorbar(
+            x, mean, yerr=[mean - low, high - mean], fmt="o-", color=color, capsize=3, label=method
+        )
     ax.set_xticks(
         x, ticks, rotation=30 if len(ticks) > 6 else 0, ha="right" if len(ticks) > 6 else "center"
     )
@@ -141,8 +142,11 @@ def failure_vs_recall_figure(summary: Summary, path: Path) -> Path:
         if method == BASELINE:
             continue
         for town, marker in zip(summary.towns, markers * 4):
-            pts = [(100 * c.recall[0], c.failure.mean) for s in summary.setups
-                   if (c := summary.cell(town, method, s.label)) and c.recall and c.failure]  # fmt: skip
+            pts = [
+                (100 * c.recall[0], c.failure.mean)
+                for s in summary.setups
+                if (c := summary.cell(town, method, s.label)) and c.recall and c.failure
+            ]
             if pts:
                 r, f = zip(*pts)
                 label = (

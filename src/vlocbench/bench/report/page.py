@@ -121,18 +121,30 @@ def _recordings_html(rows: Sequence[EpisodeRow], out: Path) -> str:
     items = []
     for path in sorted(folder.glob("*.rrd")) if folder.is_dir() else ():
         r = by_key.get(path.stem)
-        what = (f"{r.kind} drive, {r.town}, {method_label(r.method)}, {r.setup}, "
-                f"repetition {r.repetition}" if r else "an episode of another run")  # fmt: skip
+        what = (
+            f"{r.kind} drive, {r.town}, {method_label(r.method)}, {r.setup}, "
+            f"repetition {r.repetition}"
+            if r
+            else "an episode of another run"
+        )
         items.append(
             f'<li><a href="../{VIEW_DIR}/{path.name}">{path.name}</a>: {html.escape(what)}</li>'
         )
-    hint = ("<p>Make one with <code>vlocbench view OUTPUT --setup LABEL --method NAME</code> and open"
-            " it with <code>rerun FILE.rrd</code>.</p>")  # fmt: skip
+    hint = (
+        "<p>Make one with <code>vlocbench view OUTPUT --setup LABEL --method NAME</code> and open"
+        " it with <code>rerun FILE.rrd</code>.</p>"
+    )
     return f"<h2>Recordings (rerun)</h2><ul>{''.join(items)}</ul>{hint}" if items else ""
 
 
-def write_page(summary: Summary, rows: Sequence[EpisodeRow], tables: list[tuple[str, Table]],
-                figures: list[Path], examples: bool, out: Path) -> Path:  # fmt: skip
+def write_page(
+    summary: Summary,
+    rows: Sequence[EpisodeRow],
+    tables: list[tuple[str, Table]],
+    figures: list[Path],
+    examples: bool,
+    out: Path,
+) -> Path:
     spec = summary.spec
     page = out / "index.html"
     page.write_text(

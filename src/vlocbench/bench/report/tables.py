@@ -12,7 +12,7 @@ import matplotlib
 matplotlib.use("Agg")
 import numpy as np
 
-from vlocbench.bench.metrics import PLACE_RADII_M
+from vlocbench.bench.metrics import METRICS, PLACE_RADII_M
 from vlocbench.bench.summary import BASELINE, Cell, Summary
 
 Table = tuple[list[str], list[list[str]]]  # header, rows
@@ -122,8 +122,14 @@ def cause_table(summary: Summary, town: str) -> Table:
             continue
         seen.add(c.keys)
         label = "all" if method == BASELINE else setup_header(summary, s.label)
-        rows.append([method_label(method), label,
-                     *(fmt(c.failure_by_cause.get(k, 0.0)) for k in causes), str(c.timeouts)])  # fmt: skip
+        rows.append(
+            [
+                method_label(method),
+                label,
+                *(fmt(c.failure_by_cause.get(k, 0.0)) for k in causes),
+                str(c.timeouts),
+            ]
+        )
     return header, rows
 
 
@@ -172,8 +178,33 @@ def fragmentation_table(summary: Summary, town: str) -> Table:
                 for o in summary.setups
             )
             label = "all" if shared else setup_header(summary, s.label)
-            rows.append([method_label(method), label,
-                         str(f.failures), str(f.places), worst, fmt(c.tracking_error_m, 2)])  # fmt: skip
+            rows.append(
+                [
+                    method_label(method),
+                    label,
+                    str(f.failures),
+                    str(f.places),
+                    worst,
+                    fmt(c.tracking_error_m, 2),
+                ]
+            )
+    return header, rows
+
+
+def declared_metrics_table(summary: Summary, town: str) -> Table:
+    """One column per declared metric (:data:`vlocbench.bench.metrics.METRICS`), a row per method
+    and setup, each cell combined over the drives and repetitions the metric declares."""
+    header = ["method", "setup", *(m.header for m in METRICS.values())]
+    rows, seen = [], set()
+    for method in summary.methods:
+        for s in summary.setups:
+            c = summary.cell(town, method, s.label)
+            if c is None or c.keys in seen:
+                continue
+            seen.add(c.keys)  # a shared baseline once
+            values = [fmt(c.extra.get(name, float("nan")), m.digits) for name, m in METRICS.items()]
+            label = "all" if method == BASELINE else setup_header(summary, s.label)
+            rows.append([method_label(method), label, *values])
     return header, rows
 
 
@@ -185,8 +216,14 @@ def markdown(table: Table) -> str:
 
 
 def latex_escape(text: str) -> str:
-    for a, b in (("\\", r"\textbackslash{}"), ("_", r"\_"), ("%", r"\%"), ("&", r"\&"),
-                 ("#", r"\#"), ("–", "--")):  # fmt: skip
+    for a, b in (
+        ("\\", r"\textbackslash{}"),
+        ("_", r"\_"),
+        ("%", r"\%"),
+        ("&", r"\&"),
+        ("#", r"\#"),
+        ("–", "--"),
+    ):
         text = text.replace(a, b)
     return text
 
@@ -194,9 +231,19 @@ def latex_escape(text: str) -> str:
 def latex(table: Table, caption: str) -> str:
     header, rows = table
     body = [" & ".join(latex_escape(c) for c in r) + r" \\" for r in rows]
-    return "\n".join([
-        r"\begin{table}[t]", r"\centering", rf"\caption{{{latex_escape(caption)}}}",
-        r"\resizebox{\linewidth}{!}{%", r"\begin{tabular}{l" + "c" * (len(header) - 1) + "}",
-        r"\toprule", " & ".join(latex_escape(h) for h in header) + r" \\", r"\midrule",
-        *body, r"\bottomrule", r"\end{tabular}}", r"\end{table}",
-    ])  # fmt: skip
+    return "\n".join(
+        [
+            r"\begin{table}[t]",
+            r"\centering",
+            rf"\caption{{{latex_escape(caption)}}}",
+            r"\resizebox{\linewidth}{!}{%",
+            r"\begin{tabular}{l" + "c" * (len(header) - 1) + "}",
+            r"\toprule",
+            " & ".join(latex_escape(h) for h in header) + r" \\",
+            r"\midrule",
+            *body,
+            r"\bottomrule",
+            r"\end{tabular}}",
+            r"\end{table}",
+        ]
+    )
