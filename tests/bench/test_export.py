@@ -27,16 +27,22 @@ def test_a_run_exports_for_evo_hloc_and_colmap(tiny, capsys):
     locs = read_episode_table(out, recall, "localizations")
     ok = locs["success"].astype(bool)
 
-    def tum(path):
-        a = np.loadtxt(path, ndmin=2)
-        return a[:, 0], [make_pose(rotation_from_quaternion(*r[4:8]), r[1:4]) for r in a]
+    # evo itself, as `evo_ape tum estimates_truth.txt estimates.txt` reads them: no alignment
+    from evo.core import metrics
+    from evo.tools import file_interface
 
-    t_est, est = tum(out / "export" / "tum" / recall / "estimates.txt")
-    t_true, true = tum(out / "export" / "tum" / recall / "estimates_truth.txt")
-    assert np.array_equal(t_est, locs["time_s"][ok]) and np.array_equal(t_est, t_true)
-    errors = np.array([pose_error(a, b) for a, b in zip(true, est, strict=True)])
-    assert np.allclose(errors[:, 0], locs["position_error_3d_m"][ok], atol=1e-6)
-    assert np.allclose(errors[:, 1], locs["rotation_error_deg"][ok], atol=1e-4)
+    tum = out / "export" / "tum" / recall
+    true = file_interface.read_tum_trajectory_file(str(tum / "estimates_truth.txt"))
+    est = file_interface.read_tum_trajectory_file(str(tum / "estimates.txt"))
+    assert np.array_equal(est.timestamps, locs["time_s"][ok])
+    assert np.array_equal(est.timestamps, true.timestamps)
+    for relation, stored, atol in (
+        (metrics.PoseRelation.translation_part, "position_error_3d_m", 1e-6),
+        (metrics.PoseRelation.rotation_angle_deg, "rotation_error_deg", 1e-4),
+    ):
+        ape = metrics.APE(relation)
+        ape.process_data((true, est))
+        assert np.allclose(ape.error, locs[stored][ok], atol=atol), stored
     truth_rows = len(read_episode_table(out, recall, "trajectory")["time_s"])
     kitti = np.loadtxt(out / "export" / "kitti" / recall / "ekf.txt")
     assert kitti.shape == (truth_rows, 12)
@@ -46,9 +52,13 @@ def test_a_run_exports_for_evo_hloc_and_colmap(tiny, capsys):
     hloc = out / "export" / "hloc" / recall
 
     def cam_poses(name):
-        lines = [x.split() for x in (hloc / name).read_text().splitlines() if x[0] != "#"]
-        return {x[0]: make_pose(rotation_from_quaternion(*map(float, (*x[2:5], x[1]))),
-                                np.array(x[5:8], float)) for x in lines}  # fmt: skip
+        """As hloc's evaluation reads a results file: every line a name and seven numbers."""
+        poses = {}
+        for line in (hloc / name).read_text().splitlines():
+            name, *data = line.split()
+            q, t = np.split(np.array(data, float), [4])
+            poses[name] = make_pose(rotation_from_quaternion(*q[1:], q[0]), t)
+        return poses
 
     results, truth = cam_poses("results.txt"), cam_poses("ground_truth.txt")
     assert len(results) == ok.sum() and len(truth) == len(ok)

@@ -12,7 +12,8 @@ Per finished episode of the latest run, in ``OUTPUT/export/FORMAT/KEY/``:
 - ``hloc`` (recall drives): ``results.txt``, hloc's localization results ``name qw qx qy qz tx ty
   tz`` of cam_from_world (COLMAP's convention) for each answered query image and camera,
   ``ground_truth.txt`` the true poses alike for every query, and ``queries_with_intrinsics.txt``
-  (``name PINHOLE width height fx fy cx cy``, COLMAP's pixel centres);
+  (``name PINHOLE width height fx fy cx cy``, COLMAP's pixel centres); no header line, as hloc
+  writes them and as its readers expect;
 - ``colmap``: per gallery the run's maps were built from, in ``OUTPUT/export/colmap/GALLERY/``, a
   COLMAP text model with its cameras and images at their known poses and no points (what hloc's
   triangulation starts from; the images stay in the gallery's ``images/``).
@@ -105,9 +106,9 @@ def estimate_poses(locs: dict[str, Array], rows: Array) -> Array:
     )  # fmt: skip
 
 
-def _write(path: Path, lines: list[str], header: str = "") -> Path:
+def _write(path: Path, lines: list[str]) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text((f"# {header}\n" if header else "") + "".join(f"{x}\n" for x in lines))
+    path.write_text("".join(f"{x}\n" for x in lines))
     return path
 
 
@@ -149,16 +150,16 @@ def _export_hloc(locs: dict[str, Array], config: dict[str, Any], dest: Path) -> 
                 poses.append(invert_pose(pose @ vehicle_from_cam))
         return names, np.array(poses).reshape(-1, 4, 4)
 
-    header = "name qw qx qy qz tx ty tz (cam_from_world, COLMAP's convention)"
+    # no header line: hloc's readers take every line as a name and its numbers
+    estimates = hloc_lines(*named(answered, estimate_poses(locs, answered)))
+    intrinsics = [
+        colmap_intrinsics_line(f"{c.name}/{k:06d}.png", c) for c in cameras for k in everything
+    ]
     return [
-        _write(dest / "results.txt", hloc_lines(*named(answered, estimate_poses(locs, answered))),
-               header),
-        _write(dest / "ground_truth.txt", hloc_lines(*named(everything, true)), header),
-        _write(
-            dest / "queries_with_intrinsics.txt",
-            [colmap_intrinsics_line(f"{c.name}/{k:06d}.png", c) for c in cameras for k in everything],
-        ),
-    ]  # fmt: skip
+        _write(dest / "results.txt", estimates),
+        _write(dest / "ground_truth.txt", hloc_lines(*named(everything, true))),
+        _write(dest / "queries_with_intrinsics.txt", intrinsics),
+    ]
 
 
 def export_run(output_dir: str | Path, fmt: str) -> list[Path]:
