@@ -1,0 +1,96 @@
+"""A run's results as pandas DataFrames: one call from an output folder to a table of its episodes,
+and one per episode for its trajectory and its localizations.
+
+>>> from vlocbench import results
+>>> df = results.episodes("out/paper/weather")
+>>> failures = df[df.kind != "recall"]           # failure drives and the odometry line
+>>> failures.groupby(["town", "method", "weather.fog_visual_range_m"]).failures_per_km.mean()
+
+gives the mean column of the report's failure-rate table (the odometry line is the ``odometry``
+method; its drives serve every setup, so its rows carry the setup they were stored under).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from vlocbench.bench.experiment import ExperimentPlan, plan_from_stored
+from vlocbench.bench.metrics import PLACE_RADII_M, PLACE_RANKS, RECALL_THRESHOLDS
+from vlocbench.bench.store import EpisodeRow, read_episode_table, read_episodes, read_latest_run
+
+# the columns of each row before its levels and metrics
+ID_COLUMNS = ("key", "kind", "town", "method", "setup", "repetition", "seed", "status", "error")
+_RECALL = [f"{m:g}m_{d:g}deg" for m, d in RECALL_THRESHOLDS]
+# tuple metrics spread over named columns, e.g. recall_0.25m_2deg, place_recall_at5_10m
+_SPREAD = {
+    "recall": [f"recall_{t}" for t in _RECALL],
+    "recall_planar": [f"recall_planar_{t}" for t in _RECALL],
+    "recall_ekf": [f"recall_ekf_{t}" for t in _RECALL],
+    "place_recall": [f"place_recall_at{n}_{r:g}m" for n in PLACE_RANKS for r in PLACE_RADII_M],
+}
+
+
+def episodes(output_dir: str | Path, plan: ExperimentPlan | None = None) -> pd.DataFrame:
+    """The episodes of the latest run in ``output_dir`` (or every stored episode of ``plan``), a
+    row each: ``ID_COLUMNS``; the setup's swept levels, a column per key (grouped levels spread:
+    ``weather.fog_visual_range_m``); every metric of ``EpisodeMetrics`` (recall tuples spread over
+    ``recall_0.25m_2deg`` ...), the declared metrics by name, and the episode's ``wall_s``.
+    Episodes that ended in an error have NaN metrics and their ``error``."""
+    if plan is None:
+        stored, rows = read_latest_run(output_dir)
+        plan = plan_from_stored(stored)
+    else:
+        keys = {t.key for t in plan.tasks()}
+        rows = [r for r in read_episodes(output_dir) if r.key in keys]
+    levels = {s.label: _levels(s.levels) for s in plan.setups}
+    records = [_record(r, levels.get(r.setup, {})) for r in rows]
+    frame = pd.DataFrame.from_records(records)
+    if frame.empty:
+        return pd.DataFrame(columns=list(ID_COLUMNS))
+    first = [c for c in ID_COLUMNS if c in frame] + sorted({k for v in levels.values() for k in v})
+    return frame[first + [c for c in frame.columns if c not in first]]
+
+
+def trajectory(output_dir: str | Path, key: str) -> pd.DataFrame:
+    """Episode ``key``'s trajectory, a row per simulation step (0.05 s): time, the true pose, the
+    EKF's pose, speeds and odometry (metres, radians, seconds, as stored)."""
+    return pd.DataFrame(read_episode_table(output_dir, key, "trajectory"))
+
+
+def localizations(output_dir: str | Path, key: str) -> pd.DataFrame:
+    """Episode ``key``'s localizations, a row per query: its time, success, the estimate, its
+    errors (position, 3D position, rotation, yaw) and the method's report (inliers, compute
+    time, ...); no rows for an odometry-only drive."""
+    return pd.DataFrame(read_episode_table(output_dir, key, "localizations"))
+
+
+def _levels(levels: tuple[tuple[str, Any], ...]) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for key, value in levels:
+        if isinstance(value, dict):
+            out |= {f"{key}.{k}": v for k, v in value.items()}
+        elif isinstance(value, list | tuple):  # a camera rig: its size
+            out[key] = len(value)
+        else:
+            out[key] = value
+    return out
+
+
+def _record(row: EpisodeRow, levels: dict[str, Any]) -> dict[str, Any]:
+    record: dict[str, Any] = {c: getattr(row, c) for c in ID_COLUMNS} | levels
+    m = row.metrics
+    if m is None:
+        return record | {"wall_s": row.wall_s}
+    for name, value in vars(m).items():
+        if name in _SPREAD:
+            padded = list(value) + [np.nan] * (len(_SPREAD[name]) - len(value))
+            record |= dict(zip(_SPREAD[name], padded, strict=True))
+        elif name == "extra":
+            record |= value
+        else:  # a number, or a list kept whole (failure sites and causes, drift stretches)
+            record[name] = value
+    return record | {"wall_s": row.wall_s}

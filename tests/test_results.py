@@ -1,0 +1,34 @@
+"""Results as DataFrames, checked against the report's own numbers on a real run."""
+
+import numpy as np
+import pytest
+
+from vlocbench import results
+from vlocbench.bench.experiment import plan_from_stored
+from vlocbench.bench.store import read_latest_run
+from vlocbench.bench.summary import summarize
+
+
+def test_episodes_as_a_dataframe_give_the_reports_numbers(tiny):
+    root, _ = tiny
+    out = root / "out"
+    df = results.episodes(out)
+    stored, rows = read_latest_run(out)
+    summary = summarize(plan_from_stored(stored), rows)
+    [town] = summary.towns  # as the experiment names it (a YAML path here); df.town: its name
+    assert set(df.town) == {summary.town_names[town]} == {"small"}
+    assert len(df) == len(rows) and set(df.kind) == {"failure", "recall", "baseline"}
+    assert {"illumination.k", "failures_per_km", "recall_0.25m_2deg", "mean_segment_m"} <= set(df)
+    assert set(df["illumination.k"].dropna()) == {0, 6}
+    failures = df[df.kind != "recall"]
+    f = failures.groupby(["method", "setup"]).failures_per_km.mean()
+    for (method, setup), value in f.items():
+        assert summary.cell(town, method, setup).failure.mean == pytest.approx(value)
+    recall = df[df.kind == "recall"].set_index("setup")
+    for setup, t1 in recall["recall_0.25m_2deg"].items():
+        assert summary.cell(town, "sift-vlad", setup).recall[0] == pytest.approx(t1)
+
+    one = recall.iloc[0]
+    traj, locs = results.trajectory(out, one.key), results.localizations(out, one.key)
+    assert len(locs) == one.queries and locs.success.mean() > 0.5
+    assert np.isclose(traj.time_s.diff().median(), 0.05) and {"true_x_m", "ekf_x_m"} <= set(traj)
