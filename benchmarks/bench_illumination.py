@@ -131,15 +131,21 @@ def main() -> None:
             answered = float(np.mean(np.isfinite(errors[0])))
             wrong = confident_wrong(*errors)
             r5 = place_recall(ranked, ranks=(5,), radii_m=(10.0,))[0]
-            ref = " / ".join(f"{t1_paper[m].get(int(k), float('nan')):.1f}"
-                             for m in ("AP-GeM + SIFT", "NetVLAD + SIFT"))  # fmt: skip
+            ref = " / ".join(
+                f"{t1_paper[m].get(int(k), float('nan')):.1f}"
+                for m in ("AP-GeM + SIFT", "NetVLAD + SIFT")
+            )
             gain, share = sim.renderer.gain, sim.renderer.exposure_share
-            print(f"{k:g} | {gain:.0f} | {share:.3g} | "
-                  + " / ".join(f"{100 * v:.1f}" for v in rec[:3])
-                  + f" | {100 * answered:.1f} / {100 * wrong:.1f} | {100 * r5:.1f}"
-                  + " | {:.0f} ({:.0f} / {:.0f} / {:.0f} / {:.0f})".format(
-                      *1000 * np.median(seconds, axis=0))
-                  + f" | {ref}", flush=True)  # fmt: skip
+            print(
+                f"{k:g} | {gain:.0f} | {share:.3g} | "
+                + " / ".join(f"{100 * v:.1f}" for v in rec[:3])
+                + f" | {100 * answered:.1f} / {100 * wrong:.1f} | {100 * r5:.1f}"
+                + " | {:.0f} ({:.0f} / {:.0f} / {:.0f} / {:.0f})".format(
+                    *1000 * np.median(seconds, axis=0)
+                )
+                + f" | {ref}",
+                flush=True,
+            )
     finally:
         sim.close()
 

@@ -91,9 +91,14 @@ def main() -> None:
         print(
             f"{method}: map {report.points} points, track length {report.mean_track_length:.2f}, "
             f"reprojection {report.mean_reprojection_error_px:.2f} px"
-            + (f"; built in {sum(report.seconds.values()) / 60:.1f} min ("
-               + ", ".join(f"{k} {v:.0f} s" for k, v in report.seconds.items()) + ")" if fresh else "")
-        )  # fmt: skip
+            + (
+                f"; built in {sum(report.seconds.values()) / 60:.1f} min ("
+                + ", ".join(f"{k} {v:.0f} s" for k, v in report.seconds.items())
+                + ")"
+                if fresh
+                else ""
+            )
+        )
         # speed: queries along the route at k = speed_k
         sim = Simulator(town, Conditions(illumination=Illumination(k=args.speed_k)))
         loc_config = LocalizerConfig(confident_inliers=args.confident_inliers)
@@ -114,8 +119,10 @@ def main() -> None:
         sim.close()
         print(
             f"  speed at k={args.speed_k:g}, 800x600: median {1000 * statistics.median(totals):.0f} ms "
-            f"per query (" + ", ".join(f"{k} {1000 * statistics.median(v):.0f} ms" for k, v in stages.items()) + ")"
-        )  # fmt: skip
+            f"per query ("
+            + ", ".join(f"{k} {1000 * statistics.median(v):.0f} ms" for k, v in stages.items())
+            + ")"
+        )
         # recall along the ground-truth drive
         for k in (float(v) for v in args.k.split(",")):
             sim = Simulator(town, Conditions(illumination=Illumination(k=k)))

@@ -57,14 +57,29 @@ def main() -> None:
     localizer = MapLocalizer(args.map)
     localizer.localize(images[0], camera)  # warm-up
     node_proc = subprocess.Popen(
-        [sys.executable, "-m", "vlocbench.cli", "ros", "localize", "--map", str(args.map),
-         "--ros-args", "-p", f"localization_frequence:={args.rate}"], env=env,
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-m",
+            "vlocbench.cli",
+            "ros",
+            "localize",
+            "--map",
+            str(args.map),
+            "--ros-args",
+            "-p",
+            f"localization_frequence:={args.rate}",
+        ],
+        env=env,
+    )
     rclpy.init()
     probe = Node("bench_ros")
     got: list[float] = []
-    probe.create_subscription(PoseWithCovarianceStamped, "visual_pose_estimate",
-                              lambda m: got.append(time.perf_counter()), 10)  # fmt: skip
+    probe.create_subscription(
+        PoseWithCovarianceStamped,
+        "visual_pose_estimate",
+        lambda m: got.append(time.perf_counter()),
+        10,
+    )
     status: list[dict[str, float]] = []  # the node's own times (s), from its diagnostics
 
     def on_status(msg: DiagnosticArray) -> None:
@@ -102,15 +117,21 @@ def main() -> None:
         return f"{1000 * statistics.median(values):.0f} ms"
 
     print(f"SIFT, 800x600, node at {args.rate:g} Hz, medians of {len(here)} images:")
-    print(f"  in process {ms(h['total'] for h in here)}; image to pose through the node "
-          f"{ms(t['round_trip'] for t in there)}, of which localizing "
-          f"{ms(t['computation_time_s'] for t in there)}")  # fmt: skip
-    print(f"  overhead, per image: {ms(t['round_trip'] - h['total'] for h, t in zip(here, there))}"
-          f"; transport and the timer's wait alone: "
-          f"{ms(t['round_trip'] - t['computation_time_s'] for t in there)}")  # fmt: skip
+    print(
+        f"  in process {ms(h['total'] for h in here)}; image to pose through the node "
+        f"{ms(t['round_trip'] for t in there)}, of which localizing "
+        f"{ms(t['computation_time_s'] for t in there)}"
+    )
+    print(
+        f"  overhead, per image: {ms(t['round_trip'] - h['total'] for h, t in zip(here, there))}"
+        f"; transport and the timer's wait alone: "
+        f"{ms(t['round_trip'] - t['computation_time_s'] for t in there)}"
+    )
     for stage in [s for s in here[0] if s != "total"]:
-        print(f"  {stage}: {ms(h[stage] for h in here)} in process, "
-              f"{ms(t[f'{stage}_s'] for t in there)} in the node")  # fmt: skip
+        print(
+            f"  {stage}: {ms(h[stage] for h in here)} in process, "
+            f"{ms(t[f'{stage}_s'] for t in there)} in the node"
+        )
 
 
 def sim_speed(town: str, repeats: int) -> None:
@@ -134,8 +155,10 @@ def sim_speed(town: str, repeats: int) -> None:
             factors.append((node.sim.state.time_s - t0) / (time.perf_counter() - wall0))
     node.destroy_node()
     rclpy.shutdown()
-    print(f"simulator node, {town}: {statistics.median(factors):.1f}x real time "
-          f"(20 Hz, one 800x600 camera at 2 Hz; median of {repeats} 10 s stretches)")  # fmt: skip
+    print(
+        f"simulator node, {town}: {statistics.median(factors):.1f}x real time "
+        f"(20 Hz, one 800x600 camera at 2 Hz; median of {repeats} 10 s stretches)"
+    )
 
 
 if __name__ == "__main__":

@@ -157,16 +157,28 @@ def test_cli_run_and_report_errors(tiny, tmp_path, capsys):
 
     root, _ = tiny
     bad = tmp_path / "bad.yaml"
-    bad.write_text(yaml.safe_dump({"towns": ["town10"], "methods": ["sift-vlad"],
-                                   "sweep": {"weather.fogg": [10]}}))  # fmt: skip
+    bad.write_text(
+        yaml.safe_dump(
+            {"towns": ["town10"], "methods": ["sift-vlad"], "sweep": {"weather.fogg": [10]}}
+        )
+    )
     assert main(["run", str(bad)]) == 1
     assert (
         "valid: deposits, fog_model, fog_ramp_m, fog_visual_range_m, overcast, rain, wetness"
         in (capsys.readouterr().err)
     )
     other = tmp_path / "other.yaml"
-    other.write_text(yaml.safe_dump({"towns": ["town10"], "baseline": True, "recall": False,
-                                     "failure": False, "output": str(root / "out")}))  # fmt: skip
+    other.write_text(
+        yaml.safe_dump(
+            {
+                "towns": ["town10"],
+                "baseline": True,
+                "recall": False,
+                "failure": False,
+                "output": str(root / "out"),
+            }
+        )
+    )
     assert main(["run", str(other), "--no-progress"]) == 1
     assert "holds results of experiment 'tiny', not 'other'" in capsys.readouterr().err
     with pytest.raises(SystemExit) as exc:  # a malformed command line: usage, 2

@@ -226,8 +226,10 @@ def _view(args: argparse.Namespace) -> int:
     row = choose_episode(args.output, args.episode, args.setup, args.method)
     out = args.out or args.output / VIEW_DIR / f"{row.key}.rrd"
     record_episode(args.output, row, out, images=args.images, spawn=args.spawn)
-    print(f"wrote {out} ({row.kind} drive, {row.town}, {row.method or 'odometry only'}, "
-          f"{row.setup}, repetition {row.repetition}): open it with `rerun {out}`")  # fmt: skip
+    print(
+        f"wrote {out} ({row.kind} drive, {row.town}, {row.method or 'odometry only'}, "
+        f"{row.setup}, repetition {row.repetition}): open it with `rerun {out}`"
+    )
     return 0
 
 
@@ -310,8 +312,10 @@ def _gallery_export(args: argparse.Namespace) -> int:
 
     gallery = Gallery.load(args.gallery)
     export_colmap(gallery, args.out)
-    print(f"wrote the COLMAP model of {len(gallery)} images to {args.out} "
-          f"(images in {gallery.root / 'images'})")  # fmt: skip
+    print(
+        f"wrote the COLMAP model of {len(gallery)} images to {args.out} "
+        f"(images in {gallery.root / 'images'})"
+    )
     return 0
 
 
@@ -409,9 +413,10 @@ def _parents() -> dict[str, argparse.ArgumentParser]:
         "--fov", type=float, default=90.0, help="horizontal field of view in degrees"
     )
     camera.add_argument(
-        "--antialias", action="store_true",
+        "--antialias",
+        action="store_true",
         help="4 samples per pixel instead of 1 (about twice the render time)",
-    )  # fmt: skip
+    )
     k = argparse.ArgumentParser(add_help=False)
     k.add_argument("--k", type=float, default=0.0, help="illumination level k, 0 (noon) to 10")
     report = argparse.ArgumentParser(add_help=False)
@@ -425,14 +430,18 @@ def _add_town_verbs(sub: Any, shared: dict[str, argparse.ArgumentParser]) -> Non
     p = sub.add_parser("towns", help="list the built-in towns and their routes")
     p.set_defaults(func=_towns)
 
-    p = sub.add_parser("map", parents=[shared["town"]],
-                       help="write a bird's-eye map of a town and its route (PNG)")  # fmt: skip
+    p = sub.add_parser(
+        "map", parents=[shared["town"]], help="write a bird's-eye map of a town and its route (PNG)"
+    )
     p.add_argument("-o", "--output", type=Path, help="PNG path (default: TOWN.png)")
     p.add_argument("--no-route", action="store_true", help="draw the town without its route")
     p.set_defaults(func=_map)
 
-    p = sub.add_parser("render", parents=[shared["town"], shared["camera"], shared["k"]],
-                       help="render one camera image at a route waypoint")  # fmt: skip
+    p = sub.add_parser(
+        "render",
+        parents=[shared["town"], shared["camera"], shared["k"]],
+        help="render one camera image at a route waypoint",
+    )
     p.add_argument("-o", "--output", type=Path, default=Path("render.png"), help="image path")
     p.add_argument("--waypoint", type=int, default=0, help="route waypoint index (2 m apart)")
     p.add_argument("--fog", type=float, default=None, help="fog visual range in metres")
@@ -446,8 +455,11 @@ def _add_town_verbs(sub: Any, shared: dict[str, argparse.ArgumentParser]) -> Non
     )
     p.add_argument("--season", default="summer", help="summer, autumn or winter")
     p.add_argument("--headlights", action="store_true", help="switch the headlights on")
-    p.add_argument("--street-lights", default="auto",
-                   help="the town's lamps and windows: auto (on at night), on or off")  # fmt: skip
+    p.add_argument(
+        "--street-lights",
+        default="auto",
+        help="the town's lamps and windows: auto (on at night), on or off",
+    )
     p.add_argument("--shadows", action="store_true", help="the sun casts shadows (slower)")
     p.add_argument("--dz", type=float, default=0.0, help="camera height offset in metres")
     p.add_argument("--pitch-down", type=float, default=0.0, help="camera tilt down in degrees")
@@ -462,8 +474,11 @@ def _add_town_verbs(sub: Any, shared: dict[str, argparse.ArgumentParser]) -> Non
 
 
 def _add_drive_verb(sub: Any, shared: dict[str, argparse.ArgumentParser]) -> None:
-    p = sub.add_parser("drive", parents=[shared["town"]],
-                       help="drive a town's route in closed loop and print failure rates")  # fmt: skip
+    p = sub.add_parser(
+        "drive",
+        parents=[shared["town"]],
+        help="drive a town's route in closed loop and print failure rates",
+    )
     p.add_argument(
         "--localizer", default="odometry", help="odometry (none), oracle, or visual (with --map)"
     )
@@ -483,8 +498,11 @@ def _add_drive_verb(sub: Any, shared: dict[str, argparse.ArgumentParser]) -> Non
 def _add_map_verbs(sub: Any, shared: dict[str, argparse.ArgumentParser]) -> None:
     p = sub.add_parser("gallery", help="galleries: capture one in a town, or take one from COLMAP")
     verbs = p.add_subparsers(dest="gallery_command", required=True, metavar="VERB")
-    q = verbs.add_parser("capture", parents=[shared["town"], shared["camera"], shared["k"]],
-                         help="drive a town's route and save gallery images with poses")  # fmt: skip
+    q = verbs.add_parser(
+        "capture",
+        parents=[shared["town"], shared["camera"], shared["k"]],
+        help="drive a town's route and save gallery images with poses",
+    )
     q.add_argument("--out", type=Path, help="gallery folder (default: galleries/TOWN-kK)")
     q.add_argument("--spacing", type=float, default=2.0, help="metres between images")
     q.add_argument("--speed", type=float, default=8.0, help="driving speed, m/s")
@@ -606,16 +624,22 @@ def _spin_node(make: Any, ros_args: list[str]) -> int:
 
 
 def _add_experiment_verbs(sub: Any, shared: dict[str, argparse.ArgumentParser]) -> None:
-    p = sub.add_parser("run", parents=[shared["report"]],
-                       help="run an experiment file: galleries, maps, episodes, then the report")  # fmt: skip
+    p = sub.add_parser(
+        "run",
+        parents=[shared["report"]],
+        help="run an experiment file: galleries, maps, episodes, then the report",
+    )
     p.add_argument("experiment", type=Path, help="experiment YAML (see experiments/)")
     p.add_argument("--workers", type=_count, help="local worker processes (default: one per core)")
     p.add_argument("--scheduler", help="Dask scheduler address, e.g. tcp://127.0.0.1:8786")
     p.add_argument("--output", type=Path, help="output folder (default: the experiment's)")
     p.add_argument("--towns", type=_names, help="only these of its towns (comma-separated)")
-    p.add_argument("--methods", type=_names,
-                   help="only these of its methods (comma-separated); a later run of the whole "
-                   "experiment reuses their episodes")  # fmt: skip
+    p.add_argument(
+        "--methods",
+        type=_names,
+        help="only these of its methods (comma-separated); a later run of the whole "
+        "experiment reuses their episodes",
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--no-report", action="store_true", help="skip the report")
     p.set_defaults(func=_run)
@@ -623,12 +647,21 @@ def _add_experiment_verbs(sub: Any, shared: dict[str, argparse.ArgumentParser]) 
     p = sub.add_parser("export", help="a run's episodes for evo, hloc, COLMAP or ROS 2 tools")
     p.add_argument("output", type=Path, help="the experiment's output folder")
     how = p.add_mutually_exclusive_group(required=True)
-    how.add_argument("--format", help="tum, kitti (trajectories), hloc (recall drives' results), "
-                     "colmap (the galleries as posed models): in OUTPUT/export/FORMAT")  # fmt: skip
-    how.add_argument("--rosbag", action="store_true",
-                     help="each episode as a rosbag2 (MCAP) folder in OUTPUT/bags (needs the ros extra)")  # fmt: skip
-    p.add_argument("--images", action="store_true",
-                   help="with --rosbag: the query images too (JPEG, rendered again from the truth)")  # fmt: skip
+    how.add_argument(
+        "--format",
+        help="tum, kitti (trajectories), hloc (recall drives' results), "
+        "colmap (the galleries as posed models): in OUTPUT/export/FORMAT",
+    )
+    how.add_argument(
+        "--rosbag",
+        action="store_true",
+        help="each episode as a rosbag2 (MCAP) folder in OUTPUT/bags (needs the ros extra)",
+    )
+    p.add_argument(
+        "--images",
+        action="store_true",
+        help="with --rosbag: the query images too (JPEG, rendered again from the truth)",
+    )
     p.set_defaults(func=_export)
 
     p = sub.add_parser("view", help="an episode in 3D: a rerun recording (needs the view extra)")
@@ -638,18 +671,27 @@ def _add_experiment_verbs(sub: Any, shared: dict[str, argparse.ArgumentParser]) 
     )
     p.add_argument("--setup", help="setup label, e.g. k=6 (see the report)")
     p.add_argument("--method", help="method name, or odometry for the baseline")
-    p.add_argument("--images", action="store_true",
-                   help="render the query images again and show the retrieved gallery images")  # fmt: skip
+    p.add_argument(
+        "--images",
+        action="store_true",
+        help="render the query images again and show the retrieved gallery images",
+    )
     p.add_argument("--out", type=Path, help="recording file (default: OUTPUT/view/KEY.rrd)")
     p.add_argument("--spawn", action="store_true", help="also open the rerun viewer")
     p.set_defaults(func=_view)
 
-    p = sub.add_parser("report", parents=[shared["report"]],
-                       help="tables, figures and an HTML page of a run's results")  # fmt: skip
+    p = sub.add_parser(
+        "report",
+        parents=[shared["report"]],
+        help="tables, figures and an HTML page of a run's results",
+    )
     p.add_argument("output", type=Path, help="the experiment's output folder")
-    p.add_argument("--experiment", type=Path,
-                   help="report this experiment file over every episode of it in OUTPUT, whichever "
-                        "runs ran them (default: the latest run)")  # fmt: skip
+    p.add_argument(
+        "--experiment",
+        type=Path,
+        help="report this experiment file over every episode of it in OUTPUT, whichever "
+        "runs ran them (default: the latest run)",
+    )
     p.set_defaults(func=_report)
 
 

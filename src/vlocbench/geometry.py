@@ -108,8 +108,9 @@ def skew(v: Array) -> Array:
     return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
 
-def covariance_through_offset(world_from_a_covariance: Array, world_from_a: Array,
-                              a_from_b: Array) -> Array:  # fmt: skip
+def covariance_through_offset(
+    world_from_a_covariance: Array, world_from_a: Array, a_from_b: Array
+) -> Array:
     """The (6, 6) covariance of ``world_from_b = world_from_a @ a_from_b`` for a fixed ``a_from_b``.
 
     Both covariances are over (position x, y, z in the world, m; rotation vector of a small

@@ -35,10 +35,17 @@ def synthetic_result(failures: int, queries: int = 4, lock_losses: int = 0) -> E
     t = np.linspace(0, 25, n)
     zero = np.zeros(n)
     trajectory = Trajectory(
-        time_s=t, true_x_m=t * 4, true_y_m=zero, true_yaw_rad=zero, ekf_x_m=t * 4 + 0.1,
-        ekf_y_m=zero, ekf_yaw_rad=zero, speed_mps=zero + 4, odometry_speed_mps=zero + 4.1,
+        time_s=t,
+        true_x_m=t * 4,
+        true_y_m=zero,
+        true_yaw_rad=zero,
+        ekf_x_m=t * 4 + 0.1,
+        ekf_y_m=zero,
+        ekf_yaw_rad=zero,
+        speed_mps=zero + 4,
+        odometry_speed_mps=zero + 4.1,
         odometry_yaw_rate_radps=zero + 0.01,
-    )  # fmt: skip
+    )
     reinit = tuple(
         Reinitialization(
             time_s=5.0 * (k + 1),
@@ -126,8 +133,15 @@ def run_fake(task: EpisodeTask) -> EpisodeOutcome:
 
 
 def fake_tasks():
-    spec = load_experiment({"name": "fake", "towns": ["town10"], "methods": ["sift-vlad"],
-                            "sweep": {"illumination.k": [0, 6]}, "repetitions": 2})  # fmt: skip
+    spec = load_experiment(
+        {
+            "name": "fake",
+            "towns": ["town10"],
+            "methods": ["sift-vlad"],
+            "sweep": {"illumination.k": [0, 6]},
+            "repetitions": 2,
+        }
+    )
     return spec.tasks()  # 2 x (1 + 2) + 10 = 16
 
 

@@ -87,9 +87,11 @@ def test_a_killed_or_interrupted_run_leaves_no_process_and_a_consistent_store(
     (control / "sleep-all").write_text("60")
     env = {**os.environ, "PYTHONPATH": os.getcwd(), CONTROL_ENV: str(control)}
     driver = subprocess.Popen(
-        [sys.executable, "-c", _DRIVER, str(tmp_path / "out")], env=env,
-        stderr=subprocess.PIPE, text=True,
-    )  # fmt: skip
+        [sys.executable, "-c", _DRIVER, str(tmp_path / "out")],
+        env=env,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     deadline = time.monotonic() + 60
     while len(_children(driver.pid)) < 3 and time.monotonic() < deadline:  # 2 workers, tracker
         time.sleep(0.2)
@@ -117,9 +119,13 @@ def test_dask_cluster_on_loopback(tmp_path, control):
     tasks = fake_tasks()
     (control / "die-illumination.k=6-sift-vlad-1").touch()
     cluster = distributed.LocalCluster(
-        n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
-        dashboard_address=None, local_directory=str(tmp_path / "dask"),
-    )  # fmt: skip
+        n_workers=2,
+        threads_per_worker=1,
+        processes=True,
+        host="127.0.0.1",
+        dashboard_address=None,
+        local_directory=str(tmp_path / "dask"),
+    )
     with cluster, ResultStore(tmp_path / "out", "fake") as store:
         e = execute(
             tasks, store, scheduler=cluster.scheduler_address, runner=run_fake, progress=False
@@ -136,15 +142,21 @@ def test_an_interrupted_dask_run_leaves_the_cluster_idle(tmp_path, control):
     distributed = pytest.importorskip("distributed")
     (control / "sleep-all").write_text("2")  # 8 episodes on 2 workers: about 8 s
     cluster = distributed.LocalCluster(
-        n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
-        dashboard_address=None, local_directory=str(tmp_path / "dask"),
-    )  # fmt: skip
+        n_workers=2,
+        threads_per_worker=1,
+        processes=True,
+        host="127.0.0.1",
+        dashboard_address=None,
+        local_directory=str(tmp_path / "dask"),
+    )
     env = {**os.environ, "PYTHONPATH": os.getcwd(), CONTROL_ENV: str(control)}
     with cluster, distributed.Client(cluster.scheduler_address) as client:
         driver = subprocess.Popen(
             [sys.executable, "-c", _DRIVER, str(tmp_path / "out"), cluster.scheduler_address],
-            env=env, stderr=subprocess.PIPE, text=True,
-        )  # fmt: skip
+            env=env,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
         deadline = time.monotonic() + 60
         while not client.processing() or not any(client.processing().values()):
             assert time.monotonic() < deadline, "the run never started"

@@ -48,8 +48,13 @@ def test_query_cameras_and_rigs_start_from_the_gallery_camera():
 
 
 def test_expansion_counts_and_keys():
-    spec = _spec(methods=["sift-vlad", {"name": "orb", "features": "orb-teblid", "matcher": "nn-hamming",
-                                         "retrieval": "vlad"}], sweep={"illumination.k": [0, 6]})  # fmt: skip
+    spec = _spec(
+        methods=[
+            "sift-vlad",
+            {"name": "orb", "features": "orb-teblid", "matcher": "nn-hamming", "retrieval": "vlad"},
+        ],
+        sweep={"illumination.k": [0, 6]},
+    )
     tasks = spec.tasks()
     kinds = [t.kind for t in tasks]
     # per method and setup: 1 recall + 2 failure; the baseline renders nothing, so k does not
@@ -99,9 +104,14 @@ def test_keys_name_what_makes_the_maps_not_where_they_lie():
 
 
 def test_part_of_a_plan_keeps_its_episode_keys():
-    whole = _spec(towns=["town01", "town10"], sweep={"illumination.k": [0, 6]},
-                  methods=["sift-vlad", {"name": "orb", "features": "orb-teblid",
-                                         "matcher": "nn-hamming", "retrieval": "vlad"}])  # fmt: skip
+    whole = _spec(
+        towns=["town01", "town10"],
+        sweep={"illumination.k": [0, 6]},
+        methods=[
+            "sift-vlad",
+            {"name": "orb", "features": "orb-teblid", "matcher": "nn-hamming", "retrieval": "vlad"},
+        ],
+    )
     part = whole.only(towns=["town10"], methods=["orb"])
     assert part.spec.towns == ("town10",) and [m.name for m in part.spec.methods] == ["orb"]
     keys = {t.key: t for t in whole.tasks()}
@@ -178,8 +188,18 @@ def test_shipped_experiments_load():
     root = Path(__file__).parents[2].joinpath("experiments")
     files = sorted(root.glob("*.yaml"))
     names = {f.stem for f in files}
-    assert {"smoke", "demo", "season", "intrinsics", "extrinsics", "multi_camera", "traffic",
-            "headlights", "night_retrieval", "antialiased"} <= names  # fmt: skip
+    assert {
+        "smoke",
+        "demo",
+        "season",
+        "intrinsics",
+        "extrinsics",
+        "multi_camera",
+        "traffic",
+        "headlights",
+        "night_retrieval",
+        "antialiased",
+    } <= names
     for f in files:
         spec = load_experiment(f)
         assert spec.name == f.stem and spec.setups
@@ -206,9 +226,11 @@ def test_episode_keys_are_stable():
 
 def test_a_ros_node_is_a_method_without_a_map():
     plan = _spec(
-        methods=["sift-vlad", {"name": "my-node", "kind": "ros",
-                               "args": {"image_topic": "cam", "timeout_s": 5}}],
-    )  # fmt: skip
+        methods=[
+            "sift-vlad",
+            {"name": "my-node", "kind": "ros", "args": {"image_topic": "cam", "timeout_s": 5}},
+        ],
+    )
     node = plan.spec.methods[1]
     assert not node.needs_map and node.args["image_topic"] == "cam"
     maps = {("town10", "sift-vlad"): "/cache/maps/g1/sift-vlad-1"}  # none for the node
@@ -224,5 +246,14 @@ def test_a_ros_node_is_a_method_without_a_map():
     with pytest.raises(ConfigError, match=r"ros\.pose_topic: must not be empty"):
         _spec(methods=[{"name": "n", "kind": "ros", "args": {"pose_topic": ""}}])
     with pytest.raises(ConfigError, match="kind ros takes no features, matcher"):
-        _spec(methods=[{"name": "n", "features": "sift", "matcher": "nn-ratio",
-                        "retrieval": "vlad", "kind": "ros"}])  # fmt: skip
+        _spec(
+            methods=[
+                {
+                    "name": "n",
+                    "features": "sift",
+                    "matcher": "nn-ratio",
+                    "retrieval": "vlad",
+                    "kind": "ros",
+                }
+            ]
+        )

@@ -53,11 +53,19 @@ PLUGIN = f"{__name__}:ShiftedTruth"
 
 def _experiment(root, methods):
     (root / "small.yaml").write_text(yaml.safe_dump(to_dict(small_spec())))
-    return load_experiment({
-        "name": "plugins", "towns": [str(root / "small.yaml")], "route_length_m": 60,
-        "methods": methods, "recall": False, "baseline": False, "repetitions": 1,
-        "output": str(root / "out"), "cache": str(root / "cache"),
-    })  # fmt: skip
+    return load_experiment(
+        {
+            "name": "plugins",
+            "towns": [str(root / "small.yaml")],
+            "route_length_m": 60,
+            "methods": methods,
+            "recall": False,
+            "baseline": False,
+            "repetitions": 1,
+            "output": str(root / "out"),
+            "cache": str(root / "cache"),
+        }
+    )
 
 
 def test_a_whole_localizer_from_the_tests_drives_an_episode_through_the_runner(tmp_path):

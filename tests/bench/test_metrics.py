@@ -95,9 +95,13 @@ def test_drift_at_the_end_of_each_failure_free_stretch():
     # the paper's rule: every stretch longer than 0.3 m counts (a 6 m one between failures at
     # 5 s and 7 s too); one of 0.3 m or less is a double re-initialization and is left out
     r = synthetic_result(failures=2)
-    r = dataclasses.replace(r, reinitializations=(
-        r.reinitializations[0], dataclasses.replace(r.reinitializations[1], time_s=7.0)
-    ))  # fmt: skip
+    r = dataclasses.replace(
+        r,
+        reinitializations=(
+            r.reinitializations[0],
+            dataclasses.replace(r.reinitializations[1], time_s=7.0),
+        ),
+    )
     assert [s[0] for s in drift_segments(r)] == pytest.approx([20.0, 6.1, 72.0], abs=2.1)
     tr = r.trajectory
     standing = np.where((tr.time_s > 5.0) & (tr.time_s < 7.0), 20.25, tr.true_x_m)

@@ -44,8 +44,15 @@ def test_spearman_and_shape_measures():
 
 
 def test_a_run_is_reported_beside_the_paper(tmp_path):
-    spec = load_experiment({"name": "ill", "towns": ["town10"], "methods": ["sift"],
-                            "repetitions": 2, "sweep": {"illumination.k": [0, 6, 8]}})  # fmt: skip
+    spec = load_experiment(
+        {
+            "name": "ill",
+            "towns": ["town10"],
+            "methods": ["sift"],
+            "repetitions": 2,
+            "sweep": {"illumination.k": [0, 6, 8]},
+        }
+    )
     tasks = spec.tasks()
     with ResultStore(tmp_path, "ill") as store:
         store.start_run(spec.spec.spec_hash, to_dict(spec), [t.key for t in tasks])
@@ -63,12 +70,19 @@ def test_a_run_is_reported_beside_the_paper(tmp_path):
     shapes = next(t for c, t in tables.items() if "shape of F" in c)
     assert shapes[1][0][:2] == ["vlocbench", "sift"] and len(shapes[1]) == 1 + 8
     # one level: beside the paper's at that level, without shapes
-    k0 = load_experiment({"name": "ill", "towns": ["town10"], "methods": ["sift"],
-                          "sweep": {"illumination.k": [0]}})  # fmt: skip
+    k0 = load_experiment(
+        {"name": "ill", "towns": ["town10"], "methods": ["sift"], "sweep": {"illumination.k": [0]}}
+    )
     one = dict(paper_comparison_tables(summarize(k0, [])))
     assert [t[0] for c, t in one.items() if "F (failures/km)" in c] == [["source", "method", "0"]]
     assert not any("shape of F" in c for c in one)
     # a sweep the paper has no table for gets no comparison
-    season = load_experiment({"name": "s", "towns": ["town10"], "methods": ["sift"],
-                              "sweep": {"season": ["summer", "winter"]}})  # fmt: skip
+    season = load_experiment(
+        {
+            "name": "s",
+            "towns": ["town10"],
+            "methods": ["sift"],
+            "sweep": {"season": ["summer", "winter"]},
+        }
+    )
     assert paper_comparison_tables(summarize(season, [])) == []

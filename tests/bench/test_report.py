@@ -16,8 +16,12 @@ def test_report_of_a_run(tiny):
     assert "place recognition alone" in md and "| sift-vlad | 25 m |" in md
     assert "/km) |" in md  # the fused recall with the EKF's lock losses in the ground-truth drive
     assert r"\begin{tabular}" in files.latex.read_text()
-    assert {p.name for p in files.figures} == {"failure_rate_small.png", "failure_sites_small.png",
-                                               "failure_vs_recall.png", "computation_time.png"}  # fmt: skip
+    assert {p.name for p in files.figures} == {
+        "failure_rate_small.png",
+        "failure_sites_small.png",
+        "failure_vs_recall.png",
+        "computation_time.png",
+    }
     page = files.html.read_text()
     assert page.count("data:image/png;base64,") == 4
     assert page.count("data:image/jpeg;base64,") == 4  # query and gallery view per setup
@@ -51,8 +55,10 @@ def test_a_sweep_run_in_parts_is_reported_whole(tmp_path, capsys):
     beside = files.html.parent / "failure_rate_town10_paper.png"
     assert beside in files.figures and beside.read_bytes()[:4] == b"\x89PNG"
 
-    assert main(["report", str(tmp_path), "--experiment", str(tmp_path / "ill.yaml"),
-                 "--no-examples"]) == 0  # fmt: skip
+    assert (
+        main(["report", str(tmp_path), "--experiment", str(tmp_path / "ill.yaml"), "--no-examples"])
+        == 0
+    )
     assert "5 of the 5 episodes of ill" in capsys.readouterr().out
     (tmp_path / "t01.yaml").write_text(yaml.safe_dump({**whole, "towns": ["town01"]}))
     assert main(["report", str(tmp_path), "--experiment", str(tmp_path / "t01.yaml")]) == 1

@@ -12,8 +12,15 @@ from vlocbench.config import to_dict
 def test_a_grouped_sweep_whose_keys_are_not_sorted_reports_every_cell(tmp_path):
     """The store keeps JSON with sorted keys; the setups it gives back must be the same setups."""
     levels = [{"fog_visual_range_m": v, "rain": 0.8, "overcast": 0.8} for v in (90, 30)]
-    spec = load_experiment({"name": "wx", "towns": ["town10"], "methods": ["sift-vlad"],
-                            "repetitions": 1, "sweep": {"weather": levels}})  # fmt: skip
+    spec = load_experiment(
+        {
+            "name": "wx",
+            "towns": ["town10"],
+            "methods": ["sift-vlad"],
+            "repetitions": 1,
+            "sweep": {"weather": levels},
+        }
+    )
     tasks = spec.tasks()
     with ResultStore(tmp_path, "wx") as store:
         store.start_run(spec.spec.spec_hash, to_dict(spec), [t.key for t in tasks])

@@ -76,8 +76,10 @@ def test_hlocs_verification_bounds_each_images_epipolar_distance():
     # at a 2 px bound; at 5 px each, the Sampson distance 3.5 px passes a 4 px bound
     assert verified(MappingConfig(), F, xa, xb).tolist() == [True, True, False]
     assert verified(MappingConfig(verification="sampson"), F, xa, xb).tolist() == [
-        True, True, True,
-    ]  # fmt: skip
+        True,
+        True,
+        True,
+    ]
     tight = MappingConfig(verification="sampson", epipolar_max_px=2.0)
     assert verified(tight, F, xa, xb).tolist() == [True, False, False]
 
@@ -179,10 +181,12 @@ def test_a_colmap_model_a_gallery_cannot_take_is_a_clear_error(gallery, tmp_path
     rec = pycolmap.Reconstruction(model)
     camera = next(iter(rec.cameras.values()))
     rec.cameras[camera.camera_id] = pycolmap.Camera(
-        model="SIMPLE_RADIAL", width=camera.width, height=camera.height,
+        model="SIMPLE_RADIAL",
+        width=camera.width,
+        height=camera.height,
         params=[camera.params[0], camera.params[2], camera.params[3], 0.01],
         camera_id=camera.camera_id,
-    )  # fmt: skip
+    )
     rec.write_text(model)
     with pytest.raises(LocalizationError, match="is SIMPLE_RADIAL; a gallery takes PINHOLE"):
         import_colmap(model, gallery.root / "images", tmp_path / "out")

@@ -24,10 +24,18 @@ def test_a_run_exports_as_bags_that_read_back(tmp_path, capsys):
     typestore = get_typestore(Stores.ROS2_KILTED)
     with Reader(tmp_path / "bags" / "a") as reader:
         counts = {c.topic: c.msgcount for c in reader.connections}
-        assert counts == {"/ground_truth/odom": 50, "/ekf/odom": 50, "/wheel_odometry": 50,
-                          "/visual_pose_estimate": 4, "/visual_pose_truth": 4}  # fmt: skip
-        wheel = next(typestore.deserialize_cdr(raw, c.msgtype) for c, _, raw in reader.messages()
-                     if c.topic == "/wheel_odometry")  # fmt: skip
+        assert counts == {
+            "/ground_truth/odom": 50,
+            "/ekf/odom": 50,
+            "/wheel_odometry": 50,
+            "/visual_pose_estimate": 4,
+            "/visual_pose_truth": 4,
+        }
+        wheel = next(
+            typestore.deserialize_cdr(raw, c.msgtype)
+            for c, _, raw in reader.messages()
+            if c.topic == "/wheel_odometry"
+        )
         assert wheel.twist.twist.linear.x == pytest.approx(4.1)
         assert wheel.twist.covariance[0] == pytest.approx((0.04 * 4.1) ** 2)  # the paper's model
         estimates = [
@@ -108,10 +116,14 @@ def test_a_run_as_bags_with_its_query_images(tiny, capsys):
     first = cv2.imdecode(np.asarray(images[0].data, np.uint8), cv2.IMREAD_COLOR)
     with QueryRenderer(row.config) as renderer:
         again, later = (
-            renderer.image(locs["true_x_m"][k], locs["true_y_m"][k], locs["true_yaw_rad"][k],
-                           float(locs["time_s"][k]))
+            renderer.image(
+                locs["true_x_m"][k],
+                locs["true_y_m"][k],
+                locs["true_yaw_rad"][k],
+                float(locs["time_s"][k]),
+            )
             for k in (0, 5)
-        )  # fmt: skip
+        )
     assert first.shape == (240, 320, 3)
     loss = np.abs(first[:, :, ::-1].astype(int) - again).mean()
     assert loss < 6 and np.abs(first[:, :, ::-1].astype(int) - later).mean() > 3 * loss

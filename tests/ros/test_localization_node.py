@@ -25,10 +25,12 @@ class _Tester(Node):
         self.image_pub = self.create_publisher(Image, "image", 10)
         self.info_pub = self.create_publisher(CameraInfo, "camera_info", 10)
         self.poses, self.statuses = [], []
-        self.create_subscription(PoseWithCovarianceStamped, "visual_pose_estimate",
-                                 self.poses.append, 10)  # fmt: skip
-        self.create_subscription(DiagnosticArray, "diagnostics",
-                                 lambda m: self.statuses.extend(m.status), 10)  # fmt: skip
+        self.create_subscription(
+            PoseWithCovarianceStamped, "visual_pose_estimate", self.poses.append, 10
+        )
+        self.create_subscription(
+            DiagnosticArray, "diagnostics", lambda m: self.statuses.extend(m.status), 10
+        )
 
     def values(self, status):
         return {kv.key: kv.value for kv in status.values}
@@ -125,10 +127,24 @@ def test_the_cli_node_answers_from_its_own_process(ros_context, ros_env, sift_ma
     image, world_from_vehicle = query
     env = {**os.environ, **ros_env}
     proc = subprocess.Popen(
-        [sys.executable, "-m", "vlocbench.cli", "ros", "localize", "--map", str(sift_map[0]),
-         "--ros-args", "-p", "localization_frequence:=5.0", "-p", "camera_topic:=cam"],
-        env=env, stderr=subprocess.PIPE, text=True,
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-m",
+            "vlocbench.cli",
+            "ros",
+            "localize",
+            "--map",
+            str(sift_map[0]),
+            "--ros-args",
+            "-p",
+            "localization_frequence:=5.0",
+            "-p",
+            "camera_topic:=cam",
+        ],
+        env=env,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         tester = _Tester(ros_context)
         cam_pub = tester.create_publisher(Image, "cam", 10)

@@ -19,10 +19,22 @@ def node(ros_env, sift_map):
     """Our localization node on the small town's map, in its own process."""
     env = {**os.environ, **ros_env}
     proc = subprocess.Popen(
-        [sys.executable, "-m", "vlocbench.cli", "ros", "localize", "--map", str(sift_map[0]),
-         "--ros-args", "-p", "localization_frequence:=50.0"],
-        env=env, stderr=subprocess.PIPE, text=True,
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-m",
+            "vlocbench.cli",
+            "ros",
+            "localize",
+            "--map",
+            str(sift_map[0]),
+            "--ros-args",
+            "-p",
+            "localization_frequence:=50.0",
+        ],
+        env=env,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     yield proc
     proc.send_signal(signal.SIGINT)
     assert proc.wait(timeout=30) == 0, proc.stderr.read()
@@ -35,8 +47,10 @@ def test_a_ros_node_drives_like_the_same_method_in_process(node, small_sim, stre
     try:
         remote = run_episode(small_sim, stretch, remote_localizer, config)
         navigate = dataclasses.replace(config, mode="navigate")
-        drives = [run_episode(small_sim, stretch, loc, navigate)
-                  for loc in (VisualLocalizer(sift_map[0], (CAMERA,)), remote_localizer)]  # fmt: skip
+        drives = [
+            run_episode(small_sim, stretch, loc, navigate)
+            for loc in (VisualLocalizer(sift_map[0], (CAMERA,)), remote_localizer)
+        ]
     finally:
         remote_localizer.close()
     a, b = local.localizations, remote.localizations
@@ -47,8 +61,9 @@ def test_a_ros_node_drives_like_the_same_method_in_process(node, small_sim, stre
     err_b = np.array([x.position_error_3d_m for x in b])
     np.testing.assert_allclose(err_b, err_a, atol=1e-6, equal_nan=True)  # the same poses
     assert drives[0].failures == drives[1].failures
-    np.testing.assert_allclose(drives[1].trajectory.true_x_m, drives[0].trajectory.true_x_m,
-                               atol=1e-6)  # fmt: skip
+    np.testing.assert_allclose(
+        drives[1].trajectory.true_x_m, drives[0].trajectory.true_x_m, atol=1e-6
+    )
 
 
 def test_a_missing_node_is_a_clear_error(ros_env):

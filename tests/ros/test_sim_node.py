@@ -23,16 +23,21 @@ def world(tmp_path):
     town = tmp_path / "small.yaml"
     town.write_text(yaml.safe_dump(to_dict(small_spec())))
     config = tmp_path / "world.yaml"
-    config.write_text(yaml.safe_dump({
-        "conditions": {"illumination": {"k": 2}},
-        "cameras": [{"name": "right", "intrinsics": {"width": 160, "height": 120}}],
-    }))  # fmt: skip
+    config.write_text(
+        yaml.safe_dump(
+            {
+                "conditions": {"illumination": {"k": 2}},
+                "cameras": [{"name": "right", "intrinsics": {"width": 160, "height": 120}}],
+            }
+        )
+    )
     return str(town), config
 
 
 def test_the_sim_node_drives_on_cmd_vel_and_publishes_its_world(ros_context, world):
-    sim = SimulatorNode(*world, context=ros_context,
-                        parameter_overrides=[Parameter("real_time_factor", value=0.0)])  # fmt: skip
+    sim = SimulatorNode(
+        *world, context=ros_context, parameter_overrides=[Parameter("real_time_factor", value=0.0)]
+    )
     probe = Node("probe", context=ros_context)
     got = {"clock": [], "truth": [], "wheel": [], "image": [], "info": [], "route": []}
     probe.create_subscription(Clock, "/clock", got["clock"].append, 10)

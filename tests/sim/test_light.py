@@ -24,9 +24,10 @@ def test_air_mass_and_daylight_follow_the_sun():
     light = [daylight(i.sun_intensity, i.sun_elevation_rad, 0.0, base).horizontal for i in levels]
     assert all(a > b for a, b in itertools.pairwise(light))
     # each step of k halves the sun, and near the horizon its skylight fades too
-    assert light[6] / light[8] == pytest.approx(4 * np.sqrt(np.sin(levels[6].sun_elevation_rad)
-                                                           / np.sin(levels[8].sun_elevation_rad)),
-                                                rel=0.05)  # fmt: skip
+    assert light[6] / light[8] == pytest.approx(
+        4 * np.sqrt(np.sin(levels[6].sun_elevation_rad) / np.sin(levels[8].sun_elevation_rad)),
+        rel=0.05,
+    )
     cloudy = daylight(1.0, base, 1.0, base)
     assert cloudy.direct < noon.direct and cloudy.ambient > noon.ambient
 

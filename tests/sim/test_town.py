@@ -30,8 +30,11 @@ def test_builtin_routes_match_the_papers(name, length_m, turns):
 def test_a_route_far_from_its_target_length_is_refused():
     spec = load_town_spec("town10")
     route = dataclasses.replace(spec.route, target_length_m=800.0)
-    with pytest.raises(ConfigError, match=r"route\.target_length_m: the route's nodes and offsets "
-                                          r"give 489 m, more than 10% off 800"):  # fmt: skip
+    with pytest.raises(
+        ConfigError,
+        match=r"route\.target_length_m: the route's nodes and offsets "
+        r"give 489 m, more than 10% off 800",
+    ):
         generate_town(dataclasses.replace(spec, route=route))
 
 

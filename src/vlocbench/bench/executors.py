@@ -44,8 +44,9 @@ class Tally:
     slots: int = 1
 
 
-def _row(task: EpisodeTask, outcome: EpisodeOutcome | None, error: str | None,
-         attempts: int) -> EpisodeRow:  # fmt: skip
+def _row(
+    task: EpisodeTask, outcome: EpisodeOutcome | None, error: str | None, attempts: int
+) -> EpisodeRow:
     config = {
         "kind": task.kind,
         "town": task.town,
@@ -88,11 +89,13 @@ class Recorder:
 
             self.bar = tqdm(total=total, unit="episode", dynamic_ncols=True)
 
-    def __call__(self, task: EpisodeTask, outcome: EpisodeOutcome | None, error: str | None,
-                 attempts: int) -> None:  # fmt: skip
+    def __call__(
+        self, task: EpisodeTask, outcome: EpisodeOutcome | None, error: str | None, attempts: int
+    ) -> None:
         t = time.perf_counter()
-        self.store.write_episode(_row(task, outcome, error, attempts),
-                                 outcome.result if outcome else None)  # fmt: skip
+        self.store.write_episode(
+            _row(task, outcome, error, attempts), outcome.result if outcome else None
+        )
         self.tally.store_s += time.perf_counter() - t
         if outcome:
             self.tally.finished += 1
@@ -166,8 +169,14 @@ def local_pool(workers: int) -> cf.ProcessPoolExecutor:
     )
 
 
-def _run_on_pool(tasks: list[EpisodeTask], workers: int, runner: Runner, record: Recorder,
-                 tally: Tally, max_attempts: int) -> None:  # fmt: skip
+def _run_on_pool(
+    tasks: list[EpisodeTask],
+    workers: int,
+    runner: Runner,
+    record: Recorder,
+    tally: Tally,
+    max_attempts: int,
+) -> None:
     """Local worker processes; a pool broken by a dead worker is replaced, and the episodes that
     were in flight in it run again."""
     attempts = dict.fromkeys((t.key for t in tasks), 0)
@@ -184,8 +193,13 @@ def _run_on_pool(tasks: list[EpisodeTask], workers: int, runner: Runner, record:
                 record(task, None, "its worker process died", attempts[task.key])
 
 
-def _pool_round(pending: deque[EpisodeTask], workers: int, runner: Runner, record: Recorder,
-                attempts: dict[str, int]) -> list[EpisodeTask]:  # fmt: skip
+def _pool_round(
+    pending: deque[EpisodeTask],
+    workers: int,
+    runner: Runner,
+    record: Recorder,
+    attempts: dict[str, int],
+) -> list[EpisodeTask]:
     """Run ``pending`` on one pool until it is empty or the pool breaks; returns the episodes
     that were in flight when it broke."""
     pool = local_pool(workers)
@@ -223,8 +237,14 @@ def kill_workers(pool: cf.ProcessPoolExecutor) -> None:
         process.kill()
 
 
-def _run_on_dask(tasks: list[EpisodeTask], scheduler: str, runner: Runner, record: Recorder,
-                 tally: Tally, poll_s: float = 1.0) -> None:  # fmt: skip
+def _run_on_dask(
+    tasks: list[EpisodeTask],
+    scheduler: str,
+    runner: Runner,
+    record: Recorder,
+    tally: Tally,
+    poll_s: float = 1.0,
+) -> None:
     """A Dask cluster: twice as many episodes in flight as it has threads, so that its workers
     stay fed. Dask reruns the episodes of a worker that dies (giving up with ``KilledWorker``);
     the scheduler's count of episodes caught in a worker's death and the workers that vanished

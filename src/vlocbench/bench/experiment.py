@@ -284,8 +284,15 @@ class ExperimentPlan:
             jobs += [("baseline", None, r) for r in range(runs)]
         return jobs
 
-    def _task(self, town: str, town_dict: dict[str, Any], setup: Setup, kind: EpisodeKind,
-              method: MethodSpec | None, rep: int) -> EpisodeTask:  # fmt: skip
+    def _task(
+        self,
+        town: str,
+        town_dict: dict[str, Any],
+        setup: Setup,
+        kind: EpisodeKind,
+        method: MethodSpec | None,
+        rep: int,
+    ) -> EpisodeTask:
         config = dataclasses.replace(
             setup.episode,
             mode="ground_truth" if kind == "recall" else "navigate",
@@ -316,9 +323,15 @@ class ExperimentPlan:
             16,
         )
         return EpisodeTask(
-            kind=kind, town=town, setup=setup, method=method, repetition=rep, episode=config,
-            route_length_m=self.spec.route_length_m, key=key,
-        )  # fmt: skip
+            kind=kind,
+            town=town,
+            setup=setup,
+            method=method,
+            repetition=rep,
+            episode=config,
+            route_length_m=self.spec.route_length_m,
+            key=key,
+        )
 
 
 # what an odometry-only drive depends on among a setup's conditions: the traffic alone (it renders
@@ -409,8 +422,11 @@ def _resolve_setups(spec: ExperimentSpec, sweep: list[tuple[str, list[Any]]]) ->
         conditions = from_dict(Conditions, tree, "sweep")
         levels = tuple((k, v) for (k, _), v in zip(sweep, combo) if k in swept)
         label = ", ".join(_label(k, v) for k, v in levels) or "default"
-        out.append(Setup(label=label, levels=levels, conditions=conditions, cameras=cameras,
-                         episode=episode))  # fmt: skip
+        out.append(
+            Setup(
+                label=label, levels=levels, conditions=conditions, cameras=cameras, episode=episode
+            )
+        )
     labels = [s.label for s in out]
     require(len(set(labels)) == len(labels), "sweep", "two setups have the same levels")
     return tuple(out)

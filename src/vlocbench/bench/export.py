@@ -43,8 +43,14 @@ FORMATS = ("tum", "kitti", "hloc", "colmap")
 EXPORT_DIR = "export"
 
 
-def vehicle_poses(x_m: Array, y_m: Array, yaw_rad: Array, z_m: Array | None = None,
-                  roll_rad: Array | None = None, pitch_rad: Array | None = None) -> Array:  # fmt: skip
+def vehicle_poses(
+    x_m: Array,
+    y_m: Array,
+    yaw_rad: Array,
+    z_m: Array | None = None,
+    roll_rad: Array | None = None,
+    pitch_rad: Array | None = None,
+) -> Array:
     """(N, 4, 4) world_from_vehicle of N poses given by columns (N,); z, roll, pitch 0 if None."""
     n = len(x_m)
     z, roll, pitch = (np.zeros(n) if c is None else c for c in (z_m, roll_rad, pitch_rad))
@@ -101,9 +107,11 @@ def estimate_poses(locs: dict[str, Array], rows: Array) -> Array:
     the 6-DoF columns were kept have only x, y, yaw."""
     six_dof = all(c in locs for c in ("z_m", "roll_rad", "pitch_rad"))
     return vehicle_poses(
-        locs["x_m"][rows], locs["y_m"][rows], locs["yaw_rad"][rows],
+        locs["x_m"][rows],
+        locs["y_m"][rows],
+        locs["yaw_rad"][rows],
         *((locs[c][rows] for c in ("z_m", "roll_rad", "pitch_rad")) if six_dof else ()),
-    )  # fmt: skip
+    )
 
 
 def _write(path: Path, lines: list[str]) -> Path:
@@ -112,8 +120,9 @@ def _write(path: Path, lines: list[str]) -> Path:
     return path
 
 
-def export_episode(output_dir: str | Path, key: str, config: dict[str, Any], fmt: str,
-                   dest: Path) -> list[Path]:  # fmt: skip
+def export_episode(
+    output_dir: str | Path, key: str, config: dict[str, Any], fmt: str, dest: Path
+) -> list[Path]:
     """The episode ``key`` (its stored ``config``) in ``fmt`` into the folder ``dest``."""
     require_one_of(fmt, FORMATS, "format")
     tr = read_episode_table(output_dir, key, "trajectory")

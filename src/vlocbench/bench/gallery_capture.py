@@ -42,9 +42,12 @@ def capture_gallery(
         if travelled_m >= next_m - 1e-9:
             for frame in sim.render(cameras):
                 writer.add(
-                    f"{shots:05d}_{frame.camera.name}.png", frame.image, frame.camera.name,
-                    camera_model(frame.camera), frame.world_from_cam,
-                )  # fmt: skip
+                    f"{shots:05d}_{frame.camera.name}.png",
+                    frame.image,
+                    frame.camera.name,
+                    camera_model(frame.camera),
+                    frame.world_from_cam,
+                )
             shots += 1
             next_m += spacing_m
             if progress:

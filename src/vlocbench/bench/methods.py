@@ -75,13 +75,25 @@ class LocalizerKind:
 
 
 LOCALIZER_KINDS: dict[str, LocalizerKind] = {
-    "map": LocalizerKind("vlocbench.bench.visual:map_localizer", LocalizerConfig, True,
-                         "hloc-style stages against a map of the gallery (settings: localizer)"),
-    "oracle": LocalizerKind("vlocbench.bench.localizer:oracle_localizer", OracleConfig, False,
-                            "the true pose with seeded noise (args: OracleConfig)"),
-    "ros": LocalizerKind("vlocbench.ros.remote:ros_localizer", RosEndpoint, False,
-                         "a ROS 2 localization node outside this process (args: RosEndpoint)"),
-}  # fmt: skip
+    "map": LocalizerKind(
+        "vlocbench.bench.visual:map_localizer",
+        LocalizerConfig,
+        True,
+        "hloc-style stages against a map of the gallery (settings: localizer)",
+    ),
+    "oracle": LocalizerKind(
+        "vlocbench.bench.localizer:oracle_localizer",
+        OracleConfig,
+        False,
+        "the true pose with seeded noise (args: OracleConfig)",
+    ),
+    "ros": LocalizerKind(
+        "vlocbench.ros.remote:ros_localizer",
+        RosEndpoint,
+        False,
+        "a ROS 2 localization node outside this process (args: RosEndpoint)",
+    ),
+}
 PLUGIN_FORM = "package.module:Class"  # any other kind: a Localizer class, built with its args
 _PROTOCOL = ("localize", "reset", "close", "cameras")  # what a plugin class must define
 
@@ -121,8 +133,12 @@ class MethodSpec:
         parts = (self.features, self.matcher, self.retrieval)
         if self.kind != "map":
             own = self.localizer != LocalizerConfig() or self.mapping is not None or any(parts)
-            require(not own, where, f"kind {self.kind} takes no features, matcher, retrieval, "
-                    "localizer or mapping settings (its own go in args)")  # fmt: skip
+            require(
+                not own,
+                where,
+                f"kind {self.kind} takes no features, matcher, retrieval, "
+                "localizer or mapping settings (its own go in args)",
+            )
             if self.kind in LOCALIZER_KINDS:  # a built-in kind's arguments are checked now
                 from_dict(LOCALIZER_KINDS[self.kind].args_type, self.args, f"{where}.args")
             return
@@ -173,9 +189,11 @@ def build_localizer(method: MethodSpec, context: MethodContext) -> Localizer:
         localizer = _resolve(kind.build, f"methods.{method.name}.kind")(context, args)
     missing = [a for a in ("name", "uses_ground_truth", *_PROTOCOL) if not hasattr(localizer, a)]
     if missing:
-        raise ConfigError(f"methods.{method.name}.kind",
-                          f"{type(localizer).__name__} lacks {', '.join(missing)} of the "
-                          "Localizer protocol (vlocbench.bench.Localizer)")  # fmt: skip
+        raise ConfigError(
+            f"methods.{method.name}.kind",
+            f"{type(localizer).__name__} lacks {', '.join(missing)} of the "
+            "Localizer protocol (vlocbench.bench.Localizer)",
+        )
     return localizer
 
 
@@ -186,8 +204,11 @@ def _plugin_class(method: MethodSpec) -> type:
         raise ConfigError(where, f"{method.kind} is not a class")
     missing = [a for a in _PROTOCOL if not hasattr(cls, a)]
     if missing:
-        raise ConfigError(where, f"{method.kind} lacks {', '.join(missing)} of the Localizer "
-                          "protocol (vlocbench.bench.Localizer)")  # fmt: skip
+        raise ConfigError(
+            where,
+            f"{method.kind} lacks {', '.join(missing)} of the Localizer "
+            "protocol (vlocbench.bench.Localizer)",
+        )
     return cls
 
 

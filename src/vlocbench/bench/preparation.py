@@ -70,8 +70,9 @@ def prepare_maps(
         for town in spec.towns:
             for method in (m for m in spec.methods if m.needs_map):
                 mapping = method.mapping or spec.mapping
-                map_dir = default_map_dir(cache / "maps", galleries[town], method.name,
-                                          method.conf, mapping)  # fmt: skip
+                map_dir = default_map_dir(
+                    cache / "maps", galleries[town], method.name, method.conf, mapping
+                )
                 jobs[(town, method.name)] = (town, galleries[town], method, mapping, map_dir)
         if workers > 1:
             todo = [j for j in jobs.values() if not (j[-1] / MAP_FILE).exists()]
@@ -90,8 +91,13 @@ def prepare_gallery(plan: ExperimentPlan, town_name: str, progress: bool = False
         bars.close()
 
 
-def _in_parallel(job: Callable[..., object], args: list[tuple[Any, ...]], workers: int,
-                 bars: StageBars, stage: str) -> None:  # fmt: skip
+def _in_parallel(
+    job: Callable[..., object],
+    args: list[tuple[Any, ...]],
+    workers: int,
+    bars: StageBars,
+    stage: str,
+) -> None:
     """``job(*a)`` for every ``a`` of ``args`` on a pool of pool workers (one thread each); a
     failure or an interruption stops the others. The jobs' own progress is not shown: one bar
     counts the jobs."""
@@ -115,8 +121,9 @@ def _gallery_job(plan: ExperimentPlan, town_name: str, cache: Path) -> None:
     _gallery(plan, town_name, cache, StageBars(False))
 
 
-def _map_job(town_name: str, gallery: Gallery, method: MethodSpec, mapping: MappingConfig,
-             map_dir: Path) -> None:  # fmt: skip
+def _map_job(
+    town_name: str, gallery: Gallery, method: MethodSpec, mapping: MappingConfig, map_dir: Path
+) -> None:
     _map(town_name, gallery, method, mapping, map_dir, StageBars(False))
 
 
@@ -134,21 +141,38 @@ def _gallery(plan: ExperimentPlan, town_name: str, cache: Path, bars: StageBars)
             route = route_named(town_name, spec.route_length_m)
             shots = int(route.length_m / spec.gallery.spacing_m) + 1
             with Simulator(town, spec.gallery.conditions) as sim:
-                capture_gallery(sim, route, (spec.gallery.camera,), gallery_dir,
-                                spec.gallery.spacing_m, spec.gallery.speed_mps,
-                                progress=lambda n: bars(f"{town.name} gallery", n, shots))  # fmt: skip
+                capture_gallery(
+                    sim,
+                    route,
+                    (spec.gallery.camera,),
+                    gallery_dir,
+                    spec.gallery.spacing_m,
+                    spec.gallery.speed_mps,
+                    progress=lambda n: bars(f"{town.name} gallery", n, shots),
+                )
             logger.info(f"{town.name}: gallery captured in {time.perf_counter() - t:.0f} s")
     return Gallery.load(gallery_dir)
 
 
-def _map(town_name: str, gallery: Gallery, method: MethodSpec, mapping: MappingConfig,
-         map_dir: Path, bars: StageBars) -> Path:  # fmt: skip
+def _map(
+    town_name: str,
+    gallery: Gallery,
+    method: MethodSpec,
+    mapping: MappingConfig,
+    map_dir: Path,
+    bars: StageBars,
+) -> Path:
     """The map of ``method`` on the town's ``gallery`` in ``map_dir``, built unless it is there."""
     name = town_named(town_name).name
     if not (map_dir / MAP_FILE).exists():
         logger.info(f"{name}: building the {method.name} map in {map_dir}")
     label = f"{name} {method.name}"
-    report = build_map(gallery, method.conf, map_dir, mapping,
-                       progress=lambda stage, done, total: bars(f"{label} {stage}", done, total))  # fmt: skip
+    report = build_map(
+        gallery,
+        method.conf,
+        map_dir,
+        mapping,
+        progress=lambda stage, done, total: bars(f"{label} {stage}", done, total),
+    )
     logger.info(f"{name}: {method.name} map: {report.images} images, {report.points} points")
     return map_dir

@@ -106,17 +106,37 @@ def _nan_for_null(value: Any) -> Any:
 
 
 def _episode_row(
-    key: str, kind: str, town: str, method: str, setup: str, repetition: int, seed: int,
-    config: str, status: str, error: str | None, metrics: str | None, wall_s: float | None,
-    attempts: int, finished: float,
-) -> EpisodeRow:  # fmt: skip
+    key: str,
+    kind: str,
+    town: str,
+    method: str,
+    setup: str,
+    repetition: int,
+    seed: int,
+    config: str,
+    status: str,
+    error: str | None,
+    metrics: str | None,
+    wall_s: float | None,
+    attempts: int,
+    finished: float,
+) -> EpisodeRow:
     """An ``episodes`` table row (its columns in schema order) as an EpisodeRow."""
     return EpisodeRow(
-        key=key, kind=kind, town=town, method=method, setup=setup, repetition=repetition,
-        seed=seed, config=json.loads(config), status=status, error=error,
-        metrics=EpisodeMetrics.from_stored(_nan_for_null(json.loads(metrics))) if metrics else None, wall_s=wall_s,
+        key=key,
+        kind=kind,
+        town=town,
+        method=method,
+        setup=setup,
+        repetition=repetition,
+        seed=seed,
+        config=json.loads(config),
+        status=status,
+        error=error,
+        metrics=EpisodeMetrics.from_stored(_nan_for_null(json.loads(metrics))) if metrics else None,
+        wall_s=wall_s,
         attempts=attempts,
-    )  # fmt: skip
+    )
 
 
 def _latest_run(db: sqlite3.Connection) -> tuple[str, str] | None:
@@ -178,14 +198,18 @@ def _columns(result: EpisodeResult) -> tuple[dict[str, Any], dict[str, Any]]:
 def _make_strict(db: sqlite3.Connection) -> None:
     """Rewrite as strict JSON the rows that a store written before ``strict_json`` holds with
     NaN in them (SQLite's JSON functions stop at such a row)."""
-    for table, key, column in (("episodes", "key", "config"), ("episodes", "key", "metrics"),
-                               ("runs", "run_hash", "spec")):  # fmt: skip
+    for table, key, column in (
+        ("episodes", "key", "config"),
+        ("episodes", "key", "metrics"),
+        ("runs", "run_hash", "spec"),
+    ):
         bad = db.execute(
             f"SELECT {key}, {column} FROM {table} WHERE {column} NOTNULL AND NOT json_valid({column})"
         ).fetchall()
         for k, text in bad:  # Python's json reads NaN
-            db.execute(f"UPDATE {table} SET {column}=? WHERE {key}=?",
-                       (strict_json(json.loads(text)), k))  # fmt: skip
+            db.execute(
+                f"UPDATE {table} SET {column}=? WHERE {key}=?", (strict_json(json.loads(text)), k)
+            )
 
 
 class ResultStore:
@@ -296,12 +320,21 @@ class ResultStore:
             self._write_tables(row.key, result)
         with self._transaction(f"episode {row.key}") as db:
             columns = {
-                "key": row.key, "kind": row.kind, "town": row.town, "method": row.method,
-                "setup": row.setup, "repetition": row.repetition, "seed": row.seed,
-                "config": strict_json(row.config), "status": row.status, "error": row.error,
+                "key": row.key,
+                "kind": row.kind,
+                "town": row.town,
+                "method": row.method,
+                "setup": row.setup,
+                "repetition": row.repetition,
+                "seed": row.seed,
+                "config": strict_json(row.config),
+                "status": row.status,
+                "error": row.error,
                 "metrics": None if row.metrics is None else strict_json(asdict(row.metrics)),
-                "wall_s": row.wall_s, "attempts": row.attempts, "finished": time.time(),
-            }  # fmt: skip
+                "wall_s": row.wall_s,
+                "attempts": row.attempts,
+                "finished": time.time(),
+            }
             db.execute(
                 f"INSERT OR REPLACE INTO episodes ({', '.join(columns)}) "
                 f"VALUES ({', '.join(':' + c for c in columns)})",
@@ -318,8 +351,10 @@ class ResultStore:
         try:
             shutil.rmtree(tmp, ignore_errors=True)
             tmp.mkdir(parents=True)
-            pq.write_table(pa.table({k: np.asarray(v) for k, v in trajectory.items()}),
-                           tmp / "trajectory.parquet")  # fmt: skip
+            pq.write_table(
+                pa.table({k: np.asarray(v) for k, v in trajectory.items()}),
+                tmp / "trajectory.parquet",
+            )
             pq.write_table(pa.table(localizations), tmp / "localizations.parquet")
             if final.exists():  # left by an attempt killed before its row was committed
                 shutil.rmtree(final)

@@ -100,8 +100,9 @@ def _stored_cells(
     if row.method != BASELINE:
         return [(town, row.method, row.setup)]
     conditions = row.config["setup"]["conditions"]
-    drive = _drive({name: conditions.get(name) for name in BASELINE_CONDITIONS},
-                   row.config["episode"])  # fmt: skip
+    drive = _drive(
+        {name: conditions.get(name) for name in BASELINE_CONDITIONS}, row.config["episode"]
+    )
     return [(town, BASELINE, label) for label, d in drives if d == drive]
 
 

@@ -47,8 +47,12 @@ def _rerun() -> Any:
     return rerun
 
 
-def choose_episode(output_dir: str | Path, key: str | None = None, setup: str | None = None,
-                   method: str | None = None) -> EpisodeRow:  # fmt: skip
+def choose_episode(
+    output_dir: str | Path,
+    key: str | None = None,
+    setup: str | None = None,
+    method: str | None = None,
+) -> EpisodeRow:
     """The finished episode ``key``, or the first one (failure drives first) of ``setup`` and
     ``method`` (each optional); a clear error lists what there is."""
     _, rows = read_latest_run(output_dir)
@@ -59,13 +63,16 @@ def choose_episode(output_dir: str | Path, key: str | None = None, setup: str | 
             raise StoreError(f"{output_dir}: {len(match)} finished episodes match key {key!r}")
         return match[0]
     match = [
-        r for r in done
+        r
+        for r in done
         if setup in (None, r.setup, r.setup.split(".", 1)[-1]) and method in (None, r.method)
-    ]  # fmt: skip
+    ]
     if not match:
         there = sorted({f"{r.setup} / {r.method}" for r in done})
-        raise StoreError(f"{output_dir}: no finished episode of setup {setup!r} and method "
-                         f"{method!r}; there are: {', '.join(there)}")  # fmt: skip
+        raise StoreError(
+            f"{output_dir}: no finished episode of setup {setup!r} and method "
+            f"{method!r}; there are: {', '.join(there)}"
+        )
     order = {"failure": 0, "recall": 1, "baseline": 2}
     return min(match, key=lambda r: (order.get(r.kind, 3), r.repetition, r.key))
 
@@ -80,8 +87,13 @@ def _colour(locs: dict[str, Array], k: int) -> tuple[int, int, int]:
     return FAIR if position_m <= 5.0 and rotation_deg <= 10.0 else WRONG
 
 
-def record_episode(output_dir: str | Path, row: EpisodeRow, path: str | Path,
-                   images: bool = False, spawn: bool = False) -> Path:  # fmt: skip
+def record_episode(
+    output_dir: str | Path,
+    row: EpisodeRow,
+    path: str | Path,
+    images: bool = False,
+    spawn: bool = False,
+) -> Path:
     """Write the rerun recording of ``row`` (an episode stored in ``output_dir``) to ``path``;
     ``spawn`` also opens the viewer."""
     if row.metrics is None:
@@ -113,8 +125,12 @@ def record_episode(output_dir: str | Path, row: EpisodeRow, path: str | Path,
     sites = row.metrics.failure_sites_xy
     if sites:
         causes = list(row.metrics.failure_causes)  # one per failure, in order
-        points = rr.Points3D([(x, y, 1.0) for x, y in sites], radii=1.5, colors=[WRONG],
-                             labels=causes if len(causes) == len(sites) else None)  # fmt: skip
+        points = rr.Points3D(
+            [(x, y, 1.0) for x, y in sites],
+            radii=1.5,
+            colors=[WRONG],
+            labels=causes if len(causes) == len(sites) else None,
+        )
         rec.log("failures", points, static=True)
     if locs:
         _log_localizations(rr, rec, row, locs, images)
@@ -134,8 +150,9 @@ def _log_town(rr: Any, rec: Any, town: Town, route_xy: Array) -> None:
     rec.log("route", rr.LineStrips3D([route], colors=[(90, 90, 90)]), static=True)
 
 
-def _log_localizations(rr: Any, rec: Any, row: EpisodeRow, locs: dict[str, Array],
-                       images: bool) -> None:  # fmt: skip
+def _log_localizations(
+    rr: Any, rec: Any, row: EpisodeRow, locs: dict[str, Array], images: bool
+) -> None:
     camera = episode_camera(row.config)
     vehicle_from_cam = camera.extrinsics.vehicle_from_cam()
     intrinsics = camera.intrinsics
@@ -153,13 +170,18 @@ def _log_localizations(rr: Any, rec: Any, row: EpisodeRow, locs: dict[str, Array
                 rr.Transform3D(translation=world_from_cam[:3, 3], mat3x3=world_from_cam[:3, :3]),
             )
             frustum = rr.Pinhole(
-                focal_length=float(focal_px), width=intrinsics.width, height=intrinsics.height,
-                image_plane_distance=3.0, color=_colour(locs, k), line_width=0.05,
-            )  # fmt: skip
+                focal_length=float(focal_px),
+                width=intrinsics.width,
+                height=intrinsics.height,
+                image_plane_distance=3.0,
+                color=_colour(locs, k),
+                line_width=0.05,
+            )
             rec.log("localization/camera", frustum)
             position_m, rotation_deg = (
-                float(locs["position_error_3d_m"][k]), float(locs["rotation_error_deg"][k])
-            )  # fmt: skip
+                float(locs["position_error_3d_m"][k]),
+                float(locs["rotation_error_deg"][k]),
+            )
             rec.log("errors/position_m", rr.Scalars(position_m))
             rec.log("errors/rotation_deg", rr.Scalars(rotation_deg))
             fused = locs["fused"][k]

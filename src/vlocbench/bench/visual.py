@@ -79,12 +79,16 @@ class VisualLocalizer:
             return PoseEstimate.failure(result.reason, elapsed, **attempt)
         assert result.world_from_rig is not None
         return PoseEstimate(
-            True, result.world_from_rig, None, elapsed, result.reason,
+            True,
+            result.world_from_rig,
+            None,
+            elapsed,
+            result.reason,
             inliers=result.num_inliers,
             camera="rig" if result.generalized else query.frames[result.camera].camera.name,
             fallback=not result.generalized and result.cameras[result.camera].fallback,
             **attempt,
-        )  # fmt: skip
+        )
 
 
 def map_localizer(context: MethodContext, config: LocalizerConfig) -> VisualLocalizer:

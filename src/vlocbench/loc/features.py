@@ -85,8 +85,13 @@ class DogSiftExtractor:
 
     binary = False
 
-    def __init__(self, peak_threshold: float = 0.01, first_octave: int = 0,
-                 max_keypoints: int = 8192, name: str = "dog") -> None:  # fmt: skip
+    def __init__(
+        self,
+        peak_threshold: float = 0.01,
+        first_octave: int = 0,
+        max_keypoints: int = 8192,
+        name: str = "dog",
+    ) -> None:
         import pycolmap
 
         self.name = name
@@ -121,8 +126,13 @@ class SiftExtractor:
 
     binary = False
 
-    def __init__(self, max_keypoints: int = 2048, root: bool = True,
-                 contrast_threshold: float = 0.03, name: str = "sift") -> None:  # fmt: skip
+    def __init__(
+        self,
+        max_keypoints: int = 2048,
+        root: bool = True,
+        contrast_threshold: float = 0.03,
+        name: str = "sift",
+    ) -> None:
         self.name, self.max_keypoints, self.root = name, max_keypoints, root
         self._sift = cv2.SIFT_create(contrastThreshold=contrast_threshold)
 

@@ -145,8 +145,9 @@ class GalleryWriter:
         path = self._image_path(name, camera_name, camera, world_from_cam)
         cv2.imwrite(str(path), np.ascontiguousarray(image[:, :, ::-1]))
 
-    def add_file(self, name: str, source: Path, camera_name: str, camera: CameraModel,
-                 world_from_cam: Array) -> None:  # fmt: skip
+    def add_file(
+        self, name: str, source: Path, camera_name: str, camera: CameraModel, world_from_cam: Array
+    ) -> None:
         """Add the image file ``source`` as it is (no re-encoding), once its size is checked."""
         image = cv2.imread(str(source), cv2.IMREAD_UNCHANGED)
         if image is None:
@@ -158,8 +159,9 @@ class GalleryWriter:
             )
         shutil.copyfile(source, self._image_path(name, camera_name, camera, world_from_cam))
 
-    def _image_path(self, name: str, camera_name: str, camera: CameraModel,
-                    world_from_cam: Array) -> Path:  # fmt: skip
+    def _image_path(
+        self, name: str, camera_name: str, camera: CameraModel, world_from_cam: Array
+    ) -> Path:
         """Record the image; where its file goes (folders in its name are made)."""
         known = self.cameras.setdefault(camera_name, camera)
         if known.width != camera.width or not np.allclose(known.K, camera.K):

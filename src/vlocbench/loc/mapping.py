@@ -94,8 +94,9 @@ def map_name(method: str, conf: MethodConf, mapping: MappingConfig) -> str:
     return f"{method}-{config_hash((conf, mapping, stage_params(conf)), 8)}"
 
 
-def default_map_dir(root: str | Path, gallery: Gallery, method: str, conf: MethodConf,
-                    mapping: MappingConfig) -> Path:  # fmt: skip
+def default_map_dir(
+    root: str | Path, gallery: Gallery, method: str, conf: MethodConf, mapping: MappingConfig
+) -> Path:
     """``root/GALLERY-ID/METHOD-HASH``: one folder per (gallery, method, configuration)."""
     return Path(root) / gallery.identity / map_name(method, conf, mapping)
 
@@ -138,8 +139,10 @@ class FeatureStore:
                     del f[name]
                 g = f.create_group(name)
                 g["keypoints"], g["descriptors"], g["scores"] = (
-                    feats.keypoints, feats.descriptors, feats.scores,
-                )  # fmt: skip
+                    feats.keypoints,
+                    feats.descriptors,
+                    feats.scores,
+                )
                 f.flush()
 
     @contextmanager
@@ -205,9 +208,12 @@ def colmap_camera(cam: CameraModel, camera_id: int) -> pycolmap.Camera:
     """COLMAP's pixel centres sit at +0.5: the principal point moves by half a pixel."""
     K = cam.K
     return pycolmap.Camera(
-        model="PINHOLE", width=cam.width, height=cam.height, camera_id=camera_id,
+        model="PINHOLE",
+        width=cam.width,
+        height=cam.height,
+        camera_id=camera_id,
         params=[K[0, 0], K[1, 1], K[0, 2] + 0.5, K[1, 2] + 0.5],
-    )  # fmt: skip
+    )
 
 
 def rigid_of(a_from_b: np.ndarray) -> pycolmap.Rigid3d:
@@ -221,8 +227,13 @@ def pose_of(rigid: pycolmap.Rigid3d) -> np.ndarray:
 
 
 # -- the pipeline --------------------------------------------------------------------------------
-def _extract(gallery: Gallery, conf: MethodConf, store: FeatureStore, overwrite: bool,
-             progress: Progress | None) -> None:  # fmt: skip
+def _extract(
+    gallery: Gallery,
+    conf: MethodConf,
+    store: FeatureStore,
+    overwrite: bool,
+    progress: Progress | None,
+) -> None:
     try:
         done = set() if overwrite else store.names()
     except LocalizationError:  # left unreadable by a killed build: extract again
@@ -242,8 +253,9 @@ def _extract(gallery: Gallery, conf: MethodConf, store: FeatureStore, overwrite:
     store.write(items())
 
 
-def _global(gallery: Gallery, conf: MethodConf, out: Path, features: FeatureStore,
-            overwrite: bool) -> np.ndarray | None:  # fmt: skip
+def _global(
+    gallery: Gallery, conf: MethodConf, out: Path, features: FeatureStore, overwrite: bool
+) -> np.ndarray | None:
     """(N, D) global descriptors of the gallery, or None for pose-prior retrieval."""
     descriptor = build_retrieval(conf.retrieval)
     if descriptor is None:
@@ -279,8 +291,15 @@ def _pairs(
     return [(names[i], names[j]) for i, j in sorted(seen)]
 
 
-def _match(gallery: Gallery, conf: MethodConf, mapping: MappingConfig, features: FeatureStore,
-           pairs: list[tuple[str, str]], path: Path, progress: Progress | None) -> dict[tuple[str, str], np.ndarray]:  # fmt: skip
+def _match(
+    gallery: Gallery,
+    conf: MethodConf,
+    mapping: MappingConfig,
+    features: FeatureStore,
+    pairs: list[tuple[str, str]],
+    path: Path,
+    progress: Progress | None,
+) -> dict[tuple[str, str], np.ndarray]:
     """Matches of each pair that agree with the known poses, cached in ``path`` a chunk of
     ``MATCH_CHUNK`` pairs at a time (a batched matcher gets a chunk at once)."""
     matcher = None
@@ -296,8 +315,12 @@ def _match(gallery: Gallery, conf: MethodConf, mapping: MappingConfig, features:
                         gallery.images[gallery.index_of(a)],
                         gallery.images[gallery.index_of(b)],
                     )
-                    F = _fundamental(gallery.cameras[ia.camera], ia.world_from_cam,
-                                     gallery.cameras[ib.camera], ib.world_from_cam)  # fmt: skip
+                    F = _fundamental(
+                        gallery.cameras[ia.camera],
+                        ia.world_from_cam,
+                        gallery.cameras[ib.camera],
+                        ib.world_from_cam,
+                    )
                     m = m[verified(mapping, F, fa.keypoints[m[:, 0]], fb.keypoints[m[:, 1]])]
                 f[_pair_key(a, b)] = m.astype(np.uint32).reshape(-1, 2)
             if progress:
@@ -321,10 +344,16 @@ def posed_model(gallery: Gallery) -> pycolmap.Reconstruction:
 
 def _identity(gallery: Gallery, conf: MethodConf, mapping: MappingConfig) -> dict[str, Any]:
     """What a map's cached stages depend on, as its ``map.json`` keeps it (JSON types)."""
-    return json.loads(json.dumps({
-        "gallery_identity": gallery.identity, "method": asdict(conf), "mapping": asdict(mapping),
-        "stages": stage_params(conf),
-    }))  # fmt: skip
+    return json.loads(
+        json.dumps(
+            {
+                "gallery_identity": gallery.identity,
+                "method": asdict(conf),
+                "mapping": asdict(mapping),
+                "stages": stage_params(conf),
+            }
+        )
+    )
 
 
 def _finished_map(out: Path, identity: dict[str, Any]) -> MapReport | None:
@@ -403,16 +432,24 @@ def import_colmap(model_dir: str | Path, image_dir: str | Path, out_dir: str | P
         if not source.is_file():
             raise LocalizationError(f"{model_dir}: image {image.name!r} is not in {image_dir}")
         writer.add_file(
-            image.name, source, f"camera{image.camera_id}", cameras[image.camera_id],
+            image.name,
+            source,
+            f"camera{image.camera_id}",
+            cameras[image.camera_id],
             invert_pose(pose_of(image.cam_from_world())),
-        )  # fmt: skip
+        )
     if not writer.images:
         raise LocalizationError(f"{model_dir} has no registered images")
     return writer.close()
 
 
-def _triangulate(gallery: Gallery, mapping: MappingConfig, features: FeatureStore,
-                 matches: dict[tuple[str, str], np.ndarray], out: Path) -> pycolmap.Reconstruction:  # fmt: skip
+def _triangulate(
+    gallery: Gallery,
+    mapping: MappingConfig,
+    features: FeatureStore,
+    matches: dict[tuple[str, str], np.ndarray],
+    out: Path,
+) -> pycolmap.Reconstruction:
     rec = posed_model(gallery)
     ids = {image.name: image_id for image_id, image in sorted(rec.images.items())}
     db_path = out / "database.db"
@@ -462,8 +499,15 @@ def build_map(
         return finished or _build(gallery, conf, out, mapping, identity, overwrite, progress)
 
 
-def _build(gallery: Gallery, conf: MethodConf, out: Path, mapping: MappingConfig,
-           identity: dict[str, Any], overwrite: bool, progress: Progress | None) -> MapReport:  # fmt: skip
+def _build(
+    gallery: Gallery,
+    conf: MethodConf,
+    out: Path,
+    mapping: MappingConfig,
+    identity: dict[str, Any],
+    overwrite: bool,
+    progress: Progress | None,
+) -> MapReport:
     pycolmap.logging.minloglevel = 2
     seconds = {}
     t = time.perf_counter()

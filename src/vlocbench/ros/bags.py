@@ -110,13 +110,20 @@ def _image_messages(config: dict[str, Any], locs: dict[str, Array]) -> list[tupl
                 header=header, format="rgb8; jpeg compressed bgr8", data=jpeg.ravel()
             )
             info = _T["sensor_msgs/msg/CameraInfo"](
-                header=header, height=model.height, width=model.width,
-                distortion_model="plumb_bob", d=np.zeros(5), k=K.ravel(), r=np.eye(3).ravel(),
+                header=header,
+                height=model.height,
+                width=model.width,
+                distortion_model="plumb_bob",
+                d=np.zeros(5),
+                k=K.ravel(),
+                r=np.eye(3).ravel(),
                 p=np.hstack([K, np.zeros((3, 1))]).ravel(),
-                binning_x=0, binning_y=0, roi=_T["sensor_msgs/msg/RegionOfInterest"](
+                binning_x=0,
+                binning_y=0,
+                roi=_T["sensor_msgs/msg/RegionOfInterest"](
                     x_offset=0, y_offset=0, height=0, width=0, do_rectify=False
                 ),
-            )  # fmt: skip
+            )
             messages += [(t, f"/{name}/image/compressed", image), (t, f"/{name}/camera_info", info)]
     return messages
 
@@ -138,8 +145,9 @@ def _wheel(t_s: float, speed_mps: float, yaw_rate_radps: float, noise: OdometryN
     )
 
 
-def write_episode_bag(output_dir: str | Path, row: EpisodeRow, path: Path,
-                      images: bool = False) -> Path:  # fmt: skip
+def write_episode_bag(
+    output_dir: str | Path, row: EpisodeRow, path: Path, images: bool = False
+) -> Path:
     """The finished episode ``row`` stored in ``output_dir`` as a rosbag2 folder (one MCAP file)
     at ``path``, written whole or not at all; ``images``: with the query images."""
     episode = row.config.get("episode", {})
@@ -206,8 +214,9 @@ def export_bags(output_dir: str | Path, images: bool = False) -> list[Path]:
     out = Path(output_dir) / "bags"
     out.mkdir(parents=True, exist_ok=True)
     todo = [
-        row for row in rows
+        row
+        for row in rows
         if row.status == "ok"
         and not ((out / row.key).exists() and (not images or _has_images(out / row.key)))
-    ]  # fmt: skip
+    ]
     return [write_episode_bag(output_dir, row, out / row.key, images) for row in todo]

@@ -200,8 +200,9 @@ class LocalizationNode(Node):
         if self.marker_pub is not None:
             self.marker_pub.publish(self._markers(result, msg))
 
-    def _localize(self, msg: ImageMsg, info: CameraInfo | None,
-                  prior: PoseWithCovarianceStamped | None) -> QueryResult:  # fmt: skip
+    def _localize(
+        self, msg: ImageMsg, info: CameraInfo | None, prior: PoseWithCovarianceStamped | None
+    ) -> QueryResult:
         assert self.localizer is not None and self.gallery is not None
         image = image_from_msg(msg)
         camera: CameraModel = (

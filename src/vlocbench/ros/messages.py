@@ -60,9 +60,14 @@ def msg_from_image(rgb: Image, stamp: Time, frame_id: str) -> ImageMsg:
     """An ``rgb8`` message of (H, W, 3) RGB pixels."""
     h, w = rgb.shape[:2]
     return ImageMsg(
-        header=Header(stamp=stamp, frame_id=frame_id), height=h, width=w, encoding="rgb8",
-        is_bigendian=0, step=3 * w, data=np.ascontiguousarray(rgb, np.uint8).tobytes(),
-    )  # fmt: skip
+        header=Header(stamp=stamp, frame_id=frame_id),
+        height=h,
+        width=w,
+        encoding="rgb8",
+        is_bigendian=0,
+        step=3 * w,
+        data=np.ascontiguousarray(rgb, np.uint8).tobytes(),
+    )
 
 
 def camera_from_info(info: CameraInfo) -> CameraModel:
@@ -79,10 +84,15 @@ def info_from_camera(camera: CameraModel, stamp: Time, frame_id: str) -> CameraI
     K = np.asarray(camera.K, np.float64)
     P = np.hstack([K, np.zeros((3, 1))])
     return CameraInfo(
-        header=Header(stamp=stamp, frame_id=frame_id), width=camera.width, height=camera.height,
-        distortion_model="plumb_bob", d=[0.0] * 5, k=K.ravel().tolist(),
-        r=np.eye(3).ravel().tolist(), p=P.ravel().tolist(),
-    )  # fmt: skip
+        header=Header(stamp=stamp, frame_id=frame_id),
+        width=camera.width,
+        height=camera.height,
+        distortion_model="plumb_bob",
+        d=[0.0] * 5,
+        k=K.ravel().tolist(),
+        r=np.eye(3).ravel().tolist(),
+        p=P.ravel().tolist(),
+    )
 
 
 def pose_to_msg(world_from_base: Array) -> Pose:
@@ -99,8 +109,9 @@ def pose_from_msg(pose: Pose) -> Array:
     return make_pose(rotation_from_quaternion(o.x, o.y, o.z, o.w), np.array([p.x, p.y, p.z]))
 
 
-def pose_with_covariance(world_from_base: Array, covariance: Array, stamp: Time,
-                         frame_id: str = "map") -> PoseWithCovarianceStamped:  # fmt: skip
+def pose_with_covariance(
+    world_from_base: Array, covariance: Array, stamp: Time, frame_id: str = "map"
+) -> PoseWithCovarianceStamped:
     """``covariance`` (6, 6) over x, y, z, roll, pitch, yaw, as robot_localization reads it."""
     msg = PoseWithCovarianceStamped()
     msg.header.stamp = stamp

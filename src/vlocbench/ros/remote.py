@@ -58,8 +58,9 @@ class RosLocalizer:
         self.inliers: dict[str, int] = {}
         # whether the node reports inliers (None: not known before its first pose)
         self._reports_inliers: bool | None = None
-        self.node.create_subscription(PoseWithCovarianceStamped, endpoint.pose_topic,
-                                      self._on_pose, 10)  # fmt: skip
+        self.node.create_subscription(
+            PoseWithCovarianceStamped, endpoint.pose_topic, self._on_pose, 10
+        )
         self.node.create_subscription(DiagnosticArray, "diagnostics", self._on_status, 10)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
@@ -113,8 +114,9 @@ class RosLocalizer:
             if time.monotonic() > deadline:
                 return PoseEstimate.failure(
                     f"no answer from {self.endpoint.pose_topic!r} within "
-                    f"{self.endpoint.timeout_s:g} s", time.perf_counter() - start
-                )  # fmt: skip
+                    f"{self.endpoint.timeout_s:g} s",
+                    time.perf_counter() - start,
+                )
             self.executor.spin_once(timeout_sec=0.01)
         elapsed = time.perf_counter() - start
         if key in self.poses:

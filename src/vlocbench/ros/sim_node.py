@@ -85,10 +85,12 @@ class SimulatorNode(Node):
         self.wheel_pub = self.create_publisher(TwistWithCovarianceStamped, "wheel_odometry", 10)
         self.collision_pub = self.create_publisher(String, "collisions", 10)
         self.camera_pubs = {
-            cam.name: (self.create_publisher(Image, f"{cam.name}/image", 10),
-                       self.create_publisher(CameraInfo, f"{cam.name}/camera_info", 10))
+            cam.name: (
+                self.create_publisher(Image, f"{cam.name}/image", 10),
+                self.create_publisher(CameraInfo, f"{cam.name}/camera_info", 10),
+            )
             for cam in self.cameras
-        }  # fmt: skip
+        }
         latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self.create_publisher(PathMsg, "route", latched).publish(self._route())
         self.create_subscription(Twist, "cmd_vel", self._on_cmd_vel, 10)

@@ -121,14 +121,41 @@ def icosphere(subdiv: int) -> tuple[Array, NDArray[np.int64]]:
     """Unit icosphere: vertices (N, 3), outward counter-clockwise faces (M, 3)."""
     t = (1 + 5**0.5) / 2
     verts = [
-        [-1, t, 0], [1, t, 0], [-1, -t, 0], [1, -t, 0], [0, -1, t], [0, 1, t], [0, -1, -t],
-        [0, 1, -t], [t, 0, -1], [t, 0, 1], [-t, 0, -1], [-t, 0, 1],
-    ]  # fmt: skip
+        [-1, t, 0],
+        [1, t, 0],
+        [-1, -t, 0],
+        [1, -t, 0],
+        [0, -1, t],
+        [0, 1, t],
+        [0, -1, -t],
+        [0, 1, -t],
+        [t, 0, -1],
+        [t, 0, 1],
+        [-t, 0, -1],
+        [-t, 0, 1],
+    ]
     faces = [
-        [0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9], [5, 11, 4],
-        [11, 10, 2], [10, 7, 6], [7, 1, 8], [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8], [3, 8, 9],
-        [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1],
-    ]  # fmt: skip
+        [0, 11, 5],
+        [0, 5, 1],
+        [0, 1, 7],
+        [0, 7, 10],
+        [0, 10, 11],
+        [1, 5, 9],
+        [5, 11, 4],
+        [11, 10, 2],
+        [10, 7, 6],
+        [7, 1, 8],
+        [3, 9, 4],
+        [3, 4, 2],
+        [3, 2, 6],
+        [3, 6, 8],
+        [3, 8, 9],
+        [4, 9, 5],
+        [2, 4, 11],
+        [6, 2, 10],
+        [8, 6, 7],
+        [9, 8, 1],
+    ]
     v = [np.array(p, dtype=np.float64) / np.linalg.norm(p) for p in verts]
     f = faces
     for _ in range(subdiv):
@@ -193,20 +220,42 @@ def platform_mesh(
     _curb_faces(side, rect, radius, height, cell_m)
 
 
-def _platform_top(top: MeshBuilder, rect: tuple[float, float, float, float], r: float,
-                  height: float, cell_m: float, tile_m: float) -> None:  # fmt: skip
+def _platform_top(
+    top: MeshBuilder,
+    rect: tuple[float, float, float, float],
+    r: float,
+    height: float,
+    cell_m: float,
+    tile_m: float,
+) -> None:
     """A cross-shaped body (centre column plus the two side columns) and a fan per corner."""
     x0, y0, x1, y1 = rect
     z = np.array([0.0, 0.0, height])
     ex, ey = np.array([1.0, 0, 0]), np.array([0, 1.0, 0])
     uvk = (1 / tile_m, 1 / tile_m)
-    top.quad(np.array([x0 + r, y0, 0]) + z, ex, ey, x1 - x0 - 2 * r, y1 - y0,
-             ((x0 + r) / tile_m, y0 / tile_m), uvk, cell_m)  # fmt: skip
+    top.quad(
+        np.array([x0 + r, y0, 0]) + z,
+        ex,
+        ey,
+        x1 - x0 - 2 * r,
+        y1 - y0,
+        ((x0 + r) / tile_m, y0 / tile_m),
+        uvk,
+        cell_m,
+    )
     if r <= 0:
         return
     for xa in (x0, x1 - r):
-        top.quad(np.array([xa, y0 + r, 0]) + z, ex, ey, r, y1 - y0 - 2 * r,
-                 (xa / tile_m, (y0 + r) / tile_m), uvk, cell_m)  # fmt: skip
+        top.quad(
+            np.array([xa, y0 + r, 0]) + z,
+            ex,
+            ey,
+            r,
+            y1 - y0 - 2 * r,
+            (xa / tile_m, (y0 + r) / tile_m),
+            uvk,
+            cell_m,
+        )
     for (cx, cy), arc in corner_arcs(rect, r, 1.0):
         n = len(arc) - 1
         ring = np.concatenate([arc, np.full((n + 1, 1), height)], axis=1)
@@ -215,8 +264,13 @@ def _platform_top(top: MeshBuilder, rect: tuple[float, float, float, float], r: 
         top.add(verts, verts[:, :2] / tile_m, faces)
 
 
-def _curb_faces(side: MeshBuilder, rect: tuple[float, float, float, float], r: float,
-                height: float, cell_m: float) -> None:  # fmt: skip
+def _curb_faces(
+    side: MeshBuilder,
+    rect: tuple[float, float, float, float],
+    r: float,
+    height: float,
+    cell_m: float,
+) -> None:
     """The vertical faces along the rounded outline, subdivided: fog and lighting are computed
     per vertex."""
     outline = rounded_rect_outline(rect, r)
@@ -227,5 +281,12 @@ def _curb_faces(side: MeshBuilder, rect: tuple[float, float, float, float], r: f
         if length < 1e-6:
             continue
         u = np.array([d[0], d[1], 0.0]) / length
-        side.quad(np.array([a[0], a[1], 0.0]), u, np.array([0, 0, 1.0]), length, height,
-                  uv_per_m=(1.0, 1.0), cell_m=cell_m)  # fmt: skip
+        side.quad(
+            np.array([a[0], a[1], 0.0]),
+            u,
+            np.array([0, 0, 1.0]),
+            length,
+            height,
+            uv_per_m=(1.0, 1.0),
+            cell_m=cell_m,
+        )

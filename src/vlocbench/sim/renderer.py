@@ -370,9 +370,13 @@ class Renderer:
                 break
             g = scene.geoms[scene.ngeom]
             mujoco.mjv_initGeom(
-                g, mujoco.mjtGeom.mjGEOM_SPHERE, np.array([radius, 0, 0]), np.asarray(p, float),
-                np.eye(3).ravel(), np.array([*rgb, 1.0], np.float32),
-            )  # fmt: skip
+                g,
+                mujoco.mjtGeom.mjGEOM_SPHERE,
+                np.array([radius, 0, 0]),
+                np.asarray(p, float),
+                np.eye(3).ravel(),
+                np.array([*rgb, 1.0], np.float32),
+            )
             g.emission = 1.0
             g.specular = 0.0
             scene.ngeom += 1

@@ -38,9 +38,15 @@ SHOP_ATLAS_COLUMNS = 8
 SKY_SIZE = 64
 CAR_HALF_M = (2.3, 0.95)  # half length, half width of every car (ego, traffic, parked)
 CAR_COLORS = (
-    (0.75, 0.08, 0.08), (0.1, 0.2, 0.6), (0.85, 0.85, 0.85), (0.1, 0.1, 0.1),
-    (0.5, 0.5, 0.52), (0.9, 0.7, 0.1), (0.15, 0.45, 0.2), (0.55, 0.3, 0.15),
-)  # fmt: skip
+    (0.75, 0.08, 0.08),
+    (0.1, 0.2, 0.6),
+    (0.85, 0.85, 0.85),
+    (0.1, 0.1, 0.1),
+    (0.5, 0.5, 0.52),
+    (0.9, 0.7, 0.1),
+    (0.15, 0.45, 0.2),
+    (0.55, 0.3, 0.15),
+)
 FACADE_TINTS = ((1.0, 1.0, 1.0), (0.9, 0.93, 1.0), (1.0, 0.92, 0.85))
 SEASON_MATERIALS = ("ground", "paving", "road", "roof", "grass")
 GROUND_KINDS = (
@@ -269,9 +275,15 @@ class _SceneBuilder:
             for j in range(len(lay.ys)):
                 c = np.array([lay.xs[i], lay.ys[j], 0.0])
                 self.meshes["intersection"].quad(
-                    c + np.array([-zone, -zone, 0]) + z, np.array([1.0, 0, 0]), np.array([0, 1.0, 0]),
-                    2 * zone, 2 * zone, ((c[0] - zone) / 4, (c[1] - zone) / 4), (0.25, 0.25), cell,
-                )  # fmt: skip
+                    c + np.array([-zone, -zone, 0]) + z,
+                    np.array([1.0, 0, 0]),
+                    np.array([0, 1.0, 0]),
+                    2 * zone,
+                    2 * zone,
+                    ((c[0] - zone) / 4, (c[1] - zone) / 4),
+                    (0.25, 0.25),
+                    cell,
+                )
                 for di, dj in ((1, 0), (0, 1)):
                     if i + di >= len(lay.xs) or j + dj >= len(lay.ys):
                         continue
@@ -305,9 +317,15 @@ class _SceneBuilder:
         x0, y0, x1, y1 = self.town.extent
         m = 300.0
         self.meshes["ground"].quad(
-            np.array([x0 - m, y0 - m, 0.0]), np.array([1.0, 0, 0]), np.array([0, 1.0, 0]),
-            x1 - x0 + 2 * m, y1 - y0 + 2 * m, ((x0 - m) / 4, (y0 - m) / 4), (0.25, 0.25), 20.0,
-        )  # fmt: skip
+            np.array([x0 - m, y0 - m, 0.0]),
+            np.array([1.0, 0, 0]),
+            np.array([0, 1.0, 0]),
+            x1 - x0 + 2 * m,
+            y1 - y0 + 2 * m,
+            ((x0 - m) / 4, (y0 - m) / 4),
+            (0.25, 0.25),
+            20.0,
+        )
         for rect in self.town.sand:
             self.flat("sand", rect, 0.01, 4.0)
         for rect in self.town.water:
@@ -318,9 +336,15 @@ class _SceneBuilder:
     ) -> None:
         x0, y0, x1, y1 = rect
         self.meshes[material].quad(
-            np.array([x0, y0, z]), np.array([1.0, 0, 0]), np.array([0, 1.0, 0]), x1 - x0, y1 - y0,
-            (x0 / tile_m, y0 / tile_m), (1 / tile_m, 1 / tile_m), self.options.cell_m,
-        )  # fmt: skip
+            np.array([x0, y0, z]),
+            np.array([1.0, 0, 0]),
+            np.array([0, 1.0, 0]),
+            x1 - x0,
+            y1 - y0,
+            (x0 / tile_m, y0 / tile_m),
+            (1 / tile_m, 1 / tile_m),
+            self.options.cell_m,
+        )
 
     def platforms(self) -> None:
         h = self.town.spec.road.curb_height_m
@@ -359,10 +383,15 @@ class _SceneBuilder:
                 shop = (shop + 1 + int(rng.integers(0, count - 1))) % count
             r, c = divmod(shop, cols)
             self.meshes["shops"].quad(
-                origin + u * (j * seg), u, np.array([0.0, 0, 1]), seg, GROUND_FLOOR_M,
-                (c / cols, (r + 1) / rows), (1 / (cols * seg), -1 / (rows * GROUND_FLOOR_M)),
+                origin + u * (j * seg),
+                u,
+                np.array([0.0, 0, 1]),
+                seg,
+                GROUND_FLOOR_M,
+                (c / cols, (r + 1) / rows),
+                (1 / (cols * seg), -1 / (rows * GROUND_FLOOR_M)),
                 self.options.cell_m,
-            )  # fmt: skip
+            )
 
     def facade_wall(
         self,
@@ -391,9 +420,15 @@ class _SceneBuilder:
             for j in range(n):
                 variant = int(rng.integers(0, tile.variants))
                 self.meshes[material].quad(
-                    origin + u * (j * bay_m) + up * z, u, up, bay_m, height,
-                    (variant / tile.variants, 1.0), uv_per_m, cell,
-                )  # fmt: skip
+                    origin + u * (j * bay_m) + up * z,
+                    u,
+                    up,
+                    bay_m,
+                    height,
+                    (variant / tile.variants, 1.0),
+                    uv_per_m,
+                    cell,
+                )
                 if tile.window is not None and height == tile.height_m:
                     self.lit_window(tile, origin + u * (j * bay_m) + up * z, u, normal, bay_m, lit)
             z += tile.height_m
@@ -416,9 +451,14 @@ class _SceneBuilder:
         up = np.array([0.0, 0, 1])
         origin = corner + u * (left * bay_m) + up * ((1 - bottom) * tile.height_m) + normal * 0.02
         self.meshes["windows_lit"].quad(
-            origin, u, up, (right - left) * bay_m, (bottom - top) * tile.height_m,
-            (rank, 0.5), (0.0, 0.0),
-        )  # fmt: skip
+            origin,
+            u,
+            up,
+            (right - left) * bay_m,
+            (bottom - top) * tile.height_m,
+            (rank, 0.5),
+            (0.0, 0.0),
+        )
 
     def buildings(self) -> None:
         for k, b in enumerate(self.town.buildings):
@@ -530,11 +570,27 @@ class _SceneBuilder:
         hx, hy = CAR_HALF_M
         ego = self.spec.worldbody.add_body(name="ego")
         ego.add_freejoint(name="ego")
-        ego.add_geom(name="ego_body", type=mujoco.mjtGeom.mjGEOM_BOX, pos=[0, 0, 0.95], size=[hx, hy, 0.65],
-                     group=GROUP_EGO, contype=1, conaffinity=0, rgba=[0.8, 0.1, 0.1, 1])  # fmt: skip
+        ego.add_geom(
+            name="ego_body",
+            type=mujoco.mjtGeom.mjGEOM_BOX,
+            pos=[0, 0, 0.95],
+            size=[hx, hy, 0.65],
+            group=GROUP_EGO,
+            contype=1,
+            conaffinity=0,
+            rgba=[0.8, 0.1, 0.1, 1],
+        )
         # drives onto a sidewalk far enough: this low, narrow box reaches the slab
-        ego.add_geom(name="ego_curb", type=mujoco.mjtGeom.mjGEOM_BOX, pos=[0, 0, 0.08], size=[hx * 0.6, 0.35, 0.05],
-                     group=GROUP_EGO, contype=1, conaffinity=0, rgba=[0.2, 0.2, 0.2, 1])  # fmt: skip
+        ego.add_geom(
+            name="ego_curb",
+            type=mujoco.mjtGeom.mjGEOM_BOX,
+            pos=[0, 0, 0.08],
+            size=[hx * 0.6, 0.35, 0.05],
+            group=GROUP_EGO,
+            contype=1,
+            conaffinity=0,
+            rgba=[0.2, 0.2, 0.2, 1],
+        )
         for side in (1, -1):
             ego.add_light(
                 name=f"headlight_{'left' if side > 0 else 'right'}",
@@ -554,18 +610,50 @@ class _SceneBuilder:
             car = self.spec.worldbody.add_body(name=f"traffic_car{k}", pos=[0, 0, -50])
             car.add_freejoint(name=f"traffic_car{k}")
             color = CAR_COLORS[k % len(CAR_COLORS)]
-            car.add_geom(name=f"car_body{k}", type=mujoco.mjtGeom.mjGEOM_BOX, pos=[0, 0, 0.65], size=[hx, hy, 0.35],
-                         group=GROUP_TRAFFIC, contype=0, conaffinity=1, rgba=[*color, 1])  # fmt: skip
-            car.add_geom(name=f"car_cabin{k}", type=mujoco.mjtGeom.mjGEOM_BOX, pos=[-0.3, 0, 1.25], size=[hx * 0.55, hy * 0.92, 0.26],
-                         group=GROUP_TRAFFIC, contype=0, conaffinity=1, rgba=[0.08, 0.1, 0.12, 1])  # fmt: skip
+            car.add_geom(
+                name=f"car_body{k}",
+                type=mujoco.mjtGeom.mjGEOM_BOX,
+                pos=[0, 0, 0.65],
+                size=[hx, hy, 0.35],
+                group=GROUP_TRAFFIC,
+                contype=0,
+                conaffinity=1,
+                rgba=[*color, 1],
+            )
+            car.add_geom(
+                name=f"car_cabin{k}",
+                type=mujoco.mjtGeom.mjGEOM_BOX,
+                pos=[-0.3, 0, 1.25],
+                size=[hx * 0.55, hy * 0.92, 0.26],
+                group=GROUP_TRAFFIC,
+                contype=0,
+                conaffinity=1,
+                rgba=[0.08, 0.1, 0.12, 1],
+            )
         for k in range(self.options.max_pedestrians):
             ped = self.spec.worldbody.add_body(name=f"pedestrian{k}", pos=[0, 0, -50])
             ped.add_freejoint(name=f"pedestrian{k}")
             shirt = self.rng.uniform(0.1, 0.9, 3)
-            ped.add_geom(name=f"ped_body{k}", type=mujoco.mjtGeom.mjGEOM_CAPSULE, pos=[0, 0, 0.85], size=[0.22, 0.55, 0],
-                         group=GROUP_TRAFFIC, contype=0, conaffinity=1, rgba=[*shirt, 1])  # fmt: skip
-            ped.add_geom(name=f"ped_head{k}", type=mujoco.mjtGeom.mjGEOM_SPHERE, pos=[0, 0, 1.65], size=[0.13, 0, 0],
-                         group=GROUP_TRAFFIC, contype=0, conaffinity=1, rgba=[0.85, 0.67, 0.55, 1])  # fmt: skip
+            ped.add_geom(
+                name=f"ped_body{k}",
+                type=mujoco.mjtGeom.mjGEOM_CAPSULE,
+                pos=[0, 0, 0.85],
+                size=[0.22, 0.55, 0],
+                group=GROUP_TRAFFIC,
+                contype=0,
+                conaffinity=1,
+                rgba=[*shirt, 1],
+            )
+            ped.add_geom(
+                name=f"ped_head{k}",
+                type=mujoco.mjtGeom.mjGEOM_SPHERE,
+                pos=[0, 0, 1.65],
+                size=[0.13, 0, 0],
+                group=GROUP_TRAFFIC,
+                contype=0,
+                conaffinity=1,
+                rgba=[0.85, 0.67, 0.55, 1],
+            )
 
     def build(self) -> TownScene:
         spec = self.spec
@@ -582,9 +670,14 @@ class _SceneBuilder:
         self.props()
         season_geoms = self._mesh_geoms()
         spec.worldbody.add_light(
-            name="sun", type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL, dir=[0.3, 0.4, -0.85],
-            diffuse=[0.8, 0.8, 0.8], ambient=[0.3, 0.3, 0.3], specular=[0.2, 0.2, 0.2], castshadow=False,
-        )  # fmt: skip
+            name="sun",
+            type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL,
+            dir=[0.3, 0.4, -0.85],
+            diffuse=[0.8, 0.8, 0.8],
+            ambient=[0.3, 0.3, 0.3],
+            specular=[0.2, 0.2, 0.2],
+            castshadow=False,
+        )
         self.bodies()
         return self._scene(spec.compile(), season_geoms)
 
@@ -605,9 +698,14 @@ class _SceneBuilder:
                 name, GROUP_STATIC
             )
             self.spec.worldbody.add_geom(
-                name=f"vis_{name}", type=mujoco.mjtGeom.mjGEOM_MESH, meshname=f"mesh_{name}",
-                material=name, contype=0, conaffinity=0, group=group,
-            )  # fmt: skip
+                name=f"vis_{name}",
+                type=mujoco.mjtGeom.mjGEOM_MESH,
+                meshname=f"mesh_{name}",
+                material=name,
+                contype=0,
+                conaffinity=0,
+                group=group,
+            )
             if name in (*SEASON_MATERIALS, "intersection"):
                 season_geoms[name].append(f"vis_{name}")
         return season_geoms

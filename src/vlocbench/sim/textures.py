@@ -18,13 +18,45 @@ from vlocbench.interfaces import Image
 PX_PER_M = 64  # texel density of facade tiles: about 1.3 texels per pixel at 5 m with fx = 400
 
 _SHOP_WORDS = (
-    "CAFE", "BAKERY", "BOOKS", "PHARMACY", "HOTEL", "BAR", "PIZZA", "BANK", "FLOWERS", "SHOES",
-    "MARKET", "DELI", "OPTICS", "SUSHI", "TAILOR", "TOYS", "GARAGE", "KEBAB", "RADIO", "CINEMA",
-)  # fmt: skip
+    "CAFE",
+    "BAKERY",
+    "BOOKS",
+    "PHARMACY",
+    "HOTEL",
+    "BAR",
+    "PIZZA",
+    "BANK",
+    "FLOWERS",
+    "SHOES",
+    "MARKET",
+    "DELI",
+    "OPTICS",
+    "SUSHI",
+    "TAILOR",
+    "TOYS",
+    "GARAGE",
+    "KEBAB",
+    "RADIO",
+    "CINEMA",
+)
 _SHOP_NAMES = (
-    "ROMA", "NORD", "LUNA", "ATLAS", "MILANO", "OSLO", "EDEN", "ORION", "KAPPA", "SOL", "ALBA",
-    "VEGA", "DELTA", "LIDO", "POLO", "AURA",
-)  # fmt: skip
+    "ROMA",
+    "NORD",
+    "LUNA",
+    "ATLAS",
+    "MILANO",
+    "OSLO",
+    "EDEN",
+    "ORION",
+    "KAPPA",
+    "SOL",
+    "ALBA",
+    "VEGA",
+    "DELTA",
+    "LIDO",
+    "POLO",
+    "AURA",
+)
 
 
 def noise(shape: tuple[int, int], rng: np.random.Generator, scale_px: int, amp: float) -> NDArray:
@@ -114,9 +146,11 @@ def facade(
     else:
         y0 = round((floor_height_m - win_h) * 0.45 * PX_PER_M)
         window = (
-            round((w - win_w * PX_PER_M) / 2), y0,
-            round((w + win_w * PX_PER_M) / 2), round(y0 + win_h * PX_PER_M),
-        )  # fmt: skip
+            round((w - win_w * PX_PER_M) / 2),
+            y0,
+            round((w + win_w * PX_PER_M) / 2),
+            round(y0 + win_h * PX_PER_M),
+        )
     frame = rng.uniform(20, 240, 3)
     glass = rng.uniform([40, 55, 70], [90, 110, 130])
     balconies = family in (1, 2) and rng.random() < 0.5
@@ -254,9 +288,15 @@ def shopfront(style: int, height_m: float, rng: np.random.Generator) -> FacadeTi
     scale *= min(1.0, 0.9 * w / tw)
     (tw, th), _ = cv2.getTextSize(text, cv2.FONT_HERSHEY_DUPLEX, scale, 3)
     cv2.putText(
-        img, text, ((w - tw) // 2, (band_h + th) // 2), cv2.FONT_HERSHEY_DUPLEX, scale, ink, 3,
+        img,
+        text,
+        ((w - tw) // 2, (band_h + th) // 2),
+        cv2.FONT_HERSHEY_DUPLEX,
+        scale,
+        ink,
+        3,
         cv2.LINE_AA,
-    )  # fmt: skip
+    )
     # awning stripes under the band
     stripe = rng.uniform(40, 240, 3)
     for k, x in enumerate(range(0, w, 24)):
@@ -298,8 +338,16 @@ def road_tile(
     img = asphalt(max(w, h), rng)[:h, :w]
     for _ in range(6 * lanes_per_direction):  # patches and cracks
         x, y = int(rng.integers(0, w)), int(rng.integers(0, h))
-        cv2.ellipse(img, (x, y), (int(rng.integers(8, 40)), int(rng.integers(8, 60))), 0, 0, 360,
-                    _rgb((70, 70, 72)), -1)  # fmt: skip
+        cv2.ellipse(
+            img,
+            (x, y),
+            (int(rng.integers(8, 40)), int(rng.integers(8, 60))),
+            0,
+            0,
+            360,
+            _rgb((70, 70, 72)),
+            -1,
+        )
     cx = w // 2
     dash = round(3 * px)
     for y in range(0, h, round(length_m * px / 2)):
@@ -418,8 +466,15 @@ def sign_atlas(rng: np.random.Generator) -> Image:
         elif k in (2, 3, 4):  # speed limits
             cv2.circle(img, (cx, cy), 58, (200, 20, 25), -1)
             cv2.circle(img, (cx, cy), 44, (250, 250, 250), -1)
-            cv2.putText(img, str((k - 1) * 20 + 10), (cx - 30, cy + 15), cv2.FONT_HERSHEY_DUPLEX,
-                        1.3, (20, 20, 20), 3)  # fmt: skip
+            cv2.putText(
+                img,
+                str((k - 1) * 20 + 10),
+                (cx - 30, cy + 15),
+                cv2.FONT_HERSHEY_DUPLEX,
+                1.3,
+                (20, 20, 20),
+                3,
+            )
         elif k == 5:  # no entry
             cv2.circle(img, (cx, cy), 58, (200, 20, 25), -1)
             cv2.rectangle(img, (cx - 40, cy - 10), (cx + 40, cy + 10), (250, 250, 250), -1)
@@ -451,8 +506,14 @@ def sky(
     hor = np.array(horizon_rgb, np.float32) * 255
     t = np.linspace(0, 1, size, dtype=np.float32)[:, None, None] ** 0.6
     side = np.broadcast_to(zen * (1 - t) + hor * t, (size, size, 3))
-    faces = [side, side, side, side, np.broadcast_to(zen, (size, size, 3)), np.broadcast_to(
-        hor, (size, size, 3))]  # fmt: skip
+    faces = [
+        side,
+        side,
+        side,
+        side,
+        np.broadcast_to(zen, (size, size, 3)),
+        np.broadcast_to(hor, (size, size, 3)),
+    ]
     return np.clip(np.concatenate(faces, axis=0), 0, 255).astype(np.uint8)
 
 

@@ -46,8 +46,11 @@ def tour_sections(
     """Render the tour's images into ``out``; returns an HTML section per town."""
     out.mkdir(parents=True, exist_ok=True)
     camera = camera or gallery_camera()
-    forward = Camera("front", Intrinsics(camera.intrinsics.width, camera.intrinsics.height, 90.0),
-                     Extrinsics(x_m=2.0, z_m=1.6, yaw_deg=0.0))  # fmt: skip
+    forward = Camera(
+        "front",
+        Intrinsics(camera.intrinsics.width, camera.intrinsics.height, 90.0),
+        Extrinsics(x_m=2.0, z_m=1.6, yaw_deg=0.0),
+    )
     sections = []
     for name in towns:
         t0 = time.perf_counter()

@@ -90,6 +90,12 @@ def step_vehicle(
 def at_rest(state: VehicleState, x_m: float, y_m: float, yaw_rad: float) -> VehicleState:
     """The car placed at a new pose, stopped (re-initialization)."""
     return dataclasses.replace(
-        state, x_m=x_m, y_m=y_m, yaw_rad=yaw_rad, speed_mps=0.0, yaw_rate_radps=0.0,
-        steer_rad=0.0, accel_mps2=0.0,
-    )  # fmt: skip
+        state,
+        x_m=x_m,
+        y_m=y_m,
+        yaw_rad=yaw_rad,
+        speed_mps=0.0,
+        yaw_rate_radps=0.0,
+        steer_rad=0.0,
+        accel_mps2=0.0,
+    )
