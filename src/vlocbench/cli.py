@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import logging
+import os
 import signal
 import sys
 from collections.abc import Iterator, Sequence
@@ -13,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from vlocbench import __version__
+from vlocbench.config import NATIVE_LOG_ENV
 from vlocbench.errors import VlocbenchError
 
 EXIT_INPUT = 1
@@ -741,6 +743,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     _configure_logging(
         logging.DEBUG if args.verbose else logging.WARNING if args.quiet else logging.INFO
     )
+    if args.verbose:  # the native libraries' lines too, in this process and its workers
+        os.environ[NATIVE_LOG_ENV] = "1"
     try:
         return int(args.func(args))
     except VlocbenchError as exc:

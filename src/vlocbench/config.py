@@ -19,6 +19,10 @@ import yaml
 
 from vlocbench.errors import ConfigError, UnknownNameError
 
+# set (to anything but "" or "0") to let native libraries log everything (``vlocbench -v`` sets it;
+# worker processes inherit it): see vlocbench.loc.native
+NATIVE_LOG_ENV = "VLOCBENCH_NATIVE_LOG"
+
 T = TypeVar("T")
 
 

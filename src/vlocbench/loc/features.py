@@ -15,6 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vlocbench.errors import LocalizationError
+from vlocbench.loc.native import quiet_pycolmap
 
 
 @dataclass(frozen=True)
@@ -103,7 +104,7 @@ class DogSiftExtractor:
         options.sift.max_num_features = max_keypoints
         options.sift.normalization = pycolmap.Normalization.L1_ROOT
         options.num_threads = 1  # VLFeat runs on one thread anyway
-        pycolmap.logging.minloglevel = max(pycolmap.logging.minloglevel, 1)  # no INFO lines
+        quiet_pycolmap()
         self._sift = pycolmap.FeatureExtractor.create(options, pycolmap.Device.cpu)
 
     def extract(self, image: NDArray[np.uint8]) -> Features:

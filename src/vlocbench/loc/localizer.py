@@ -24,6 +24,7 @@ from vlocbench.geometry import invert_pose, skew
 from vlocbench.loc.features import Features, check_image
 from vlocbench.loc.gallery import CameraModel
 from vlocbench.loc.mapping import FeatureStore, colmap_camera, map_info, pose_of, rigid_of
+from vlocbench.loc.native import quiet_pycolmap
 from vlocbench.loc.registry import (
     build_features,
     build_matcher,
@@ -170,6 +171,7 @@ class MapLocalizer:
     """Localizes images against a map built by :func:`vlocbench.loc.mapping.build_map`."""
 
     def __init__(self, map_dir: str | Path, config: LocalizerConfig | None = None) -> None:
+        quiet_pycolmap()  # Ceres warns of every degenerate pose covariance
         self.map_dir = Path(map_dir)
         self.config = config or LocalizerConfig()
         self.method, self.gallery_dir = map_info(self.map_dir)  # what the map was built with

@@ -37,6 +37,7 @@ from vlocbench.geometry import invert_pose
 from vlocbench.loc.features import Features
 from vlocbench.loc.gallery import CameraModel, Gallery, GalleryWriter
 from vlocbench.loc.matchers import match_pairs
+from vlocbench.loc.native import quiet_pycolmap
 from vlocbench.loc.registry import (
     MethodConf,
     build_features,
@@ -508,7 +509,7 @@ def _build(
     overwrite: bool,
     progress: Progress | None,
 ) -> MapReport:
-    pycolmap.logging.minloglevel = 2
+    quiet_pycolmap()
     seconds = {}
     t = time.perf_counter()
     features = FeatureStore(out / "features.h5")
