@@ -20,6 +20,7 @@ from typing import Any
 
 from vlocbench.bench.experiment import EpisodeTask
 from vlocbench.bench.metrics import episode_metrics
+from vlocbench.bench.progress import Progress
 from vlocbench.bench.store import EpisodeRow, ResultStore
 from vlocbench.bench.towns import town_named
 from vlocbench.bench.worker import EpisodeOutcome, run_task, worker_init
@@ -83,11 +84,7 @@ class Recorder:
 
     def __init__(self, store: ResultStore, tally: Tally, total: int, progress: bool) -> None:
         self.store, self.tally = store, tally
-        self.bar = None
-        if progress and total:
-            from tqdm import tqdm
-
-            self.bar = tqdm(total=total, unit="episode", dynamic_ncols=True)
+        self.bar = Progress("episodes", total, "episode") if progress and total else None
 
     def __call__(
         self, task: EpisodeTask, outcome: EpisodeOutcome | None, error: str | None, attempts: int
@@ -103,12 +100,12 @@ class Recorder:
         else:
             self.tally.errors += 1
         if self.bar is not None:
-            self.bar.set_postfix_str(
+            done = self.tally.finished + self.tally.errors
+            self.bar.update_to(
+                done,
                 f"ok {self.tally.finished} err {self.tally.errors} | {task.town} "
                 f"{task.method_name} {task.kind}",
-                refresh=False,
             )
-            self.bar.update(1)
 
     def close(self) -> None:
         if self.bar is not None:

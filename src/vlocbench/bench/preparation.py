@@ -15,6 +15,7 @@ from vlocbench.bench.executors import kill_workers, local_pool
 from vlocbench.bench.experiment import ExperimentPlan
 from vlocbench.bench.gallery_capture import capture_gallery
 from vlocbench.bench.methods import MethodSpec
+from vlocbench.bench.progress import Progress, unit_of
 from vlocbench.bench.towns import route_named, town_named
 from vlocbench.loc.gallery import GALLERY_FILE, Gallery
 from vlocbench.loc.mapping import MAP_FILE, MappingConfig, build_map, default_map_dir
@@ -25,22 +26,21 @@ logger = logging.getLogger(__name__)
 
 
 class StageBars:
-    """One tqdm bar per preparation stage (gallery images, features, matches), updated by the
-    stages' progress callbacks; nothing when disabled."""
+    """The progress of each preparation stage (gallery images, features, matched pairs, maps),
+    updated by the stages' callbacks and closed as each stage finishes; nothing when disabled."""
 
     def __init__(self, enabled: bool) -> None:
         self.enabled = enabled
-        self.bars: dict[str, Any] = {}
+        self.bars: dict[str, Progress] = {}
 
     def __call__(self, stage: str, done: int, total: int) -> None:
         if not self.enabled:
             return
         if stage not in self.bars:
-            from tqdm import tqdm
-
-            self.bars[stage] = tqdm(total=total, desc=stage, unit="image", dynamic_ncols=True)
-        bar = self.bars[stage]
-        bar.update(done - bar.n)
+            self.bars[stage] = Progress(stage, total, unit_of(stage))
+        self.bars[stage].update_to(done)
+        if done >= total:  # finished: not drawn again when a later stage closes
+            self.bars.pop(stage).close()
 
     def close(self) -> None:
         for bar in self.bars.values():
