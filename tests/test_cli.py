@@ -1,4 +1,7 @@
 import os
+import signal
+import subprocess
+import sys
 
 import pytest
 import yaml
@@ -190,3 +193,33 @@ def test_cli_run_and_report_errors(tiny, tmp_path, capsys):
     assert main(["report", str(root / "out"), "--no-examples"]) == 0
     assert "index.html" in capsys.readouterr().out
     assert os.path.exists(root / "out" / "report" / "tables.md")
+
+
+@pytest.mark.parametrize("stop", [signal.SIGINT, signal.SIGTERM])
+def test_build_map_stops_cleanly_on_a_signal_and_a_rerun_finishes(gallery, tmp_path, stop):
+    """Sent while matching (pycolmap and OpenCV loaded): exit 130, no native stack trace, no map
+    file; the same command again builds the map."""
+    out = tmp_path / "map"
+    cmd = [
+        sys.executable,
+        "-m",
+        "vlocbench.cli",
+        "build-map",
+        str(gallery.root),
+        "--method",
+        "sift-vlad",
+        "--out",
+        str(out),
+    ]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    for line in proc.stdout:  # the features are extracted: the native libraries are loaded
+        if line.strip().startswith("matches") or ("features" in line and "/" in line):
+            break
+    proc.send_signal(stop)
+    code = proc.wait(timeout=60)
+    err = proc.stderr.read()
+    assert code == 130, err
+    assert "interrupted" in err and "Aborted" not in err and "stack trace" not in err, err
+    assert not (out / "map.json").exists()
+    assert subprocess.run(cmd, capture_output=True, text=True, check=True).returncode == 0
+    assert (out / "map.json").exists()

@@ -190,13 +190,12 @@ def _run(args: argparse.Namespace) -> int:
     plan = load_experiment(args.experiment).only(args.towns or (), args.methods or ())
     if args.output:
         plan = plan.with_output(args.output)
-    with _signals_interrupt():
-        summary = run_experiment(
-            plan,
-            workers=args.workers or default_workers(),
-            scheduler=args.scheduler,
-            progress=not args.no_progress,
-        )
+    summary = run_experiment(
+        plan,
+        workers=args.workers or default_workers(),
+        scheduler=args.scheduler,
+        progress=not args.no_progress,
+    )
     overhead = summary.harness_overhead
     print(
         f"{plan.name}: {summary.finished} episodes run, {summary.skipped} done before, "
@@ -253,8 +252,9 @@ def _export(args: argparse.Namespace) -> int:
 
 @contextlib.contextmanager
 def _signals_interrupt() -> Iterator[None]:
-    """SIGTERM, and SIGINT even where a shell started the run in the background with it ignored,
-    interrupt the run as Ctrl-C does: the workers stop, the store keeps what it has."""
+    """SIGTERM, and SIGINT even where a shell started the command in the background with it
+    ignored, interrupt it as Ctrl-C does: a run's workers stop, the store and the caches keep what
+    they have (a gallery or a map is written last, so an interrupted one is made again)."""
 
     def interrupt(signum: int, frame: object) -> None:
         raise KeyboardInterrupt(signal.Signals(signum).name)
@@ -573,35 +573,37 @@ def _add_ros_verbs(sub: Any, shared: dict[str, argparse.ArgumentParser]) -> None
 
 
 def _ros_localize(args: argparse.Namespace) -> int:
-    def make() -> Any:
+    def load() -> Any:
         from rclpy.parameter import Parameter
 
         from vlocbench.ros.localization_node import LocalizationNode
 
-        return LocalizationNode(
-            parameter_overrides=[Parameter("map_dir", Parameter.Type.STRING, str(args.map))]
-        )
+        map_dir = Parameter("map_dir", Parameter.Type.STRING, str(args.map))
+        return lambda: LocalizationNode(parameter_overrides=[map_dir])
 
-    return _spin_node(make, args.ros_args)
+    return _spin_node(load, args.ros_args)
 
 
 def _ros_sim(args: argparse.Namespace) -> int:
-    def make() -> Any:
+    def load() -> Any:
         from vlocbench.ros.sim_node import SimulatorNode
 
-        return SimulatorNode(args.town, args.config)
+        return lambda: SimulatorNode(args.town, args.config)
 
-    return _spin_node(make, args.ros_args)
+    return _spin_node(load, args.ros_args)
 
 
-def _spin_node(make: Any, ros_args: list[str]) -> int:
-    """Start rclpy (discovery on this machine unless set), spin the node ``make()`` builds until
-    Ctrl-C or SIGTERM, and clean up."""
+def _spin_node(load: Any, ros_args: list[str]) -> int:
+    """Start rclpy (discovery on this machine unless set), spin the node that ``load()``'s
+    constructor builds until Ctrl-C or SIGTERM, and clean up. ``load`` imports the node's module
+    before ``rclpy.init``, so that rclpy's signal handlers are the last installed."""
     from vlocbench.ros.environment import local_only
 
     local_only()
     try:
         import rclpy
+
+        make = load()
     except ImportError as exc:
         raise _missing_ros_extra(exc) from None
     from rclpy.executors import ExternalShutdownException
@@ -745,8 +747,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     if args.verbose:  # the native libraries' lines too, in this process and its workers
         os.environ[NATIVE_LOG_ENV] = "1"
+    # the ROS 2 verbs stop on rclpy's own handlers; every other command stops as Ctrl-C does
+    ros_node = args.func in (_ros_localize, _ros_sim)
     try:
-        return int(args.func(args))
+        with contextlib.nullcontext() if ros_node else _signals_interrupt():
+            return int(args.func(args))
     except VlocbenchError as exc:
         print(f"vlocbench: error: {exc}", file=sys.stderr)
         return exc.exit_code

@@ -93,7 +93,7 @@ class DogSiftExtractor:
         max_keypoints: int = 8192,
         name: str = "dog",
     ) -> None:
-        import pycolmap
+        from vlocbench.loc.native import pycolmap
 
         self.name = name
         options = pycolmap.FeatureExtractionOptions()

@@ -15,7 +15,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import pycolmap
 from numpy.typing import NDArray
 
 from vlocbench.config import ADDED_OPTION, require
@@ -24,7 +23,7 @@ from vlocbench.geometry import invert_pose, skew
 from vlocbench.loc.features import Features, check_image
 from vlocbench.loc.gallery import CameraModel
 from vlocbench.loc.mapping import FeatureStore, colmap_camera, map_info, pose_of, rigid_of
-from vlocbench.loc.native import quiet_pycolmap
+from vlocbench.loc.native import pycolmap, quiet_pycolmap
 from vlocbench.loc.registry import (
     build_features,
     build_matcher,

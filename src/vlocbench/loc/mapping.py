@@ -29,7 +29,6 @@ from typing import Any, Literal
 
 import h5py
 import numpy as np
-import pycolmap
 
 from vlocbench.config import config_hash, require, require_one_of
 from vlocbench.errors import LocalizationError
@@ -37,7 +36,7 @@ from vlocbench.geometry import invert_pose
 from vlocbench.loc.features import Features
 from vlocbench.loc.gallery import CameraModel, Gallery, GalleryWriter
 from vlocbench.loc.matchers import match_pairs
-from vlocbench.loc.native import quiet_pycolmap
+from vlocbench.loc.native import pycolmap, quiet_pycolmap
 from vlocbench.loc.registry import (
     MethodConf,
     build_features,
