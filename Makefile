@@ -13,6 +13,7 @@ test:
 	@scripts/setup.sh test
 	$(VENV)/bin/ruff check src tests benchmarks
 	$(VENV)/bin/ruff format --check src tests benchmarks
+	$(PY) -m mypy
 	$(PY) -m pytest -n $(JOBS) -q
 
 lint:

@@ -9,13 +9,16 @@ import logging
 import os
 import signal
 import sys
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from vlocbench import __version__
 from vlocbench.config import NATIVE_LOG_ENV
 from vlocbench.errors import VlocbenchError
+
+if TYPE_CHECKING:
+    from vlocbench.bench.visual import VisualLocalizer
 
 EXIT_INPUT = 1
 EXIT_USAGE = 2  # argparse's own
@@ -104,7 +107,7 @@ def _tour(args: argparse.Namespace) -> int:
     return 0
 
 
-def _visual_localizer(map_dir: Path | None) -> object:
+def _visual_localizer(map_dir: Path | None) -> VisualLocalizer:
     """The map's localizer on a camera like the one that took its gallery (right-facing mount)."""
     import json
 
@@ -138,12 +141,13 @@ def _drive(args: argparse.Namespace) -> int:
         plan_town_route,
         run_episode,
     )
+    from vlocbench.bench.localizer import Localizer
     from vlocbench.config import config_hash, from_dict, load_yaml
     from vlocbench.errors import UnknownNameError
     from vlocbench.sim import Simulator
     from vlocbench.sim.town import generate_town, load_town_spec
 
-    localizers = {
+    localizers: dict[str, Callable[[], Localizer | None]] = {
         "odometry": lambda: None,
         "oracle": lambda: OracleLocalizer(OracleConfig(args.oracle_sigma, args.oracle_yaw_deg)),
         "visual": lambda: _visual_localizer(args.map),
@@ -352,6 +356,7 @@ def _localize(args: argparse.Namespace) -> int:
     import numpy as np
 
     from vlocbench.errors import LocalizationError
+    from vlocbench.loc.features import check_image
     from vlocbench.loc.gallery import Gallery
     from vlocbench.loc.localizer import MapLocalizer
 
@@ -370,7 +375,8 @@ def _localize(args: argparse.Namespace) -> int:
         if args.prior_image not in gallery.names:
             raise LocalizationError(f"--prior-image: {args.prior_image!r} is not in the gallery")
         prior = gallery.images[gallery.index_of(args.prior_image)].world_from_cam
-    result = localizer.localize(bgr[:, :, ::-1].copy(), gallery.cameras[camera_name], prior)
+    image = check_image(bgr[:, :, ::-1], str(args.image))
+    result = localizer.localize(image, gallery.cameras[camera_name], prior)
     times = ", ".join(f"{k} {1000 * v:.0f} ms" for k, v in result.seconds.items())
     if not result.success:
         print(f"failed: {result.reason} (retrieved {', '.join(result.retrieved)}; {times})")

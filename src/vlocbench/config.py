@@ -60,7 +60,7 @@ def _convert(value: Any, annotation: Any, field: str) -> Any:
             raise UnknownNameError(field, str(value), [str(a) for a in args])
         return value
     if dataclasses.is_dataclass(annotation):
-        if isinstance(value, annotation):
+        if isinstance(annotation, type) and isinstance(value, annotation):
             return value
         return from_dict(annotation, value, field)  # type: ignore[arg-type]
     if origin is tuple:

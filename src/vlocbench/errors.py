@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Iterable
+from typing import Any
 
 
 class VlocbenchError(Exception):
@@ -26,7 +27,7 @@ class ConfigError(VlocbenchError, ValueError):
         self.reason = reason
         super().__init__(f"{field}: {reason}")
 
-    def __reduce__(self) -> tuple[type, tuple[str, str]]:
+    def __reduce__(self) -> tuple[type, tuple[Any, ...]]:
         # rebuilt from its fields, so that it crosses from a pool worker to the driver intact
         return type(self), (self.field, self.reason)
 
@@ -43,7 +44,7 @@ class UnknownNameError(ConfigError, KeyError):
     def __str__(self) -> str:  # KeyError would otherwise quote the message
         return self.args[0]
 
-    def __reduce__(self) -> tuple[type, tuple[str, str, list[str]]]:
+    def __reduce__(self) -> tuple[type, tuple[Any, ...]]:
         return type(self), (self.kind, self.name, self.valid)
 
 

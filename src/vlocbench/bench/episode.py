@@ -162,7 +162,7 @@ def _record(p: _InFlight, fused: bool | None) -> LocalizationRecord:
         z = float(e.world_from_vehicle[2, 3])
         roll, pitch, _ = rpy_of(e.world_from_vehicle[:3, :3])
         pos_err = float(np.hypot(x - tx, y - ty))
-        yaw_err = float(np.degrees(abs(wrap_angle(yaw - tyaw))))
+        yaw_err = float(np.degrees(np.abs(wrap_angle(yaw - tyaw))))
         pos_err_3d, rot_err = pose_error(p.truth, e.world_from_vehicle)
     else:
         x = y = z = yaw = roll = pitch = float("nan")

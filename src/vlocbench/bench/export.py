@@ -29,6 +29,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from vlocbench.bench.store import EpisodeRow, read_episode_table, read_latest_run
 from vlocbench.bench.visual import camera_model
@@ -102,7 +103,7 @@ def localizations(output_dir: str | Path, key: str) -> dict[str, Array]:
     return locs if "success" in locs else {}
 
 
-def estimate_poses(locs: dict[str, Array], rows: Array) -> Array:
+def estimate_poses(locs: dict[str, Array], rows: NDArray[np.integer]) -> Array:
     """(R, 4, 4) world_from_vehicle of the stored estimates at ``rows``; episodes stored before
     the 6-DoF columns were kept have only x, y, yaw."""
     six_dof = all(c in locs for c in ("z_m", "roll_rad", "pitch_rad"))
@@ -150,7 +151,7 @@ def _export_hloc(locs: dict[str, Array], config: dict[str, Any], dest: Path) -> 
     answered = np.flatnonzero(locs["success"])
     true = vehicle_poses(*(locs[c] for c in ("true_x_m", "true_y_m", "true_yaw_rad")))
 
-    def named(rows: Array, world_from_vehicle: Array) -> tuple[list[str], Array]:
+    def named(rows: NDArray[np.integer], world_from_vehicle: Array) -> tuple[list[str], Array]:
         names, poses = [], []
         for cam in cameras:
             vehicle_from_cam = cam.extrinsics.vehicle_from_cam()

@@ -107,7 +107,7 @@ def drift_segments(result: EpisodeResult) -> tuple[tuple[float, float, float], .
             continue
         k = rows[-1]
         pos = float(np.hypot(tr.ekf_x_m[k] - tr.true_x_m[k], tr.ekf_y_m[k] - tr.true_y_m[k]))
-        yaw = float(np.degrees(abs(wrap_angle(tr.ekf_yaw_rad[k] - tr.true_yaw_rad[k]))))
+        yaw = float(np.degrees(np.abs(wrap_angle(tr.ekf_yaw_rad[k] - tr.true_yaw_rad[k]))))
         out.append((driven, pos, yaw))
     return tuple(out)
 

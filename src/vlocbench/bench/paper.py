@@ -22,6 +22,8 @@ from typing import Any
 import numpy as np
 import yaml
 
+from vlocbench.interfaces import Array
+
 FACTOR_OF_AXIS = {"illumination.k": "illumination", "viewpoint": "viewpoint", "weather": "weather"}
 
 
@@ -79,7 +81,7 @@ def paper_results() -> PaperResults:
     )
 
 
-def spearman(x: Sequence[float], y: Sequence[float]) -> float:
+def spearman(x: Sequence[float] | Array, y: Sequence[float] | Array) -> float:
     """Spearman's rank correlation (ties share their mean rank); NaN when either is constant or
     fewer than 3 points."""
     a, b = np.asarray(x, np.float64), np.asarray(y, np.float64)

@@ -61,10 +61,12 @@ def prepare_maps(
     bars = StageBars(progress)
     try:
         if workers > 1:
-            todo = [
+            towns = [
                 t for t in spec.towns if not (_gallery_dir(plan, t, cache) / GALLERY_FILE).exists()
             ]
-            _in_parallel(_gallery_job, [(plan, t, cache) for t in todo], workers, bars, "galleries")
+            _in_parallel(
+                _gallery_job, [(plan, t, cache) for t in towns], workers, bars, "galleries"
+            )
         galleries = {t: _gallery(plan, t, cache, bars) for t in spec.towns}
         jobs = {}  # (town, method name) -> what _map builds it from
         for town in spec.towns:

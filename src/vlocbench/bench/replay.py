@@ -12,7 +12,7 @@ from typing import Any
 
 from vlocbench.bench.towns import town_named
 from vlocbench.config import from_dict
-from vlocbench.interfaces import Array
+from vlocbench.interfaces import Image
 from vlocbench.sim import Simulator
 from vlocbench.sim.camera import Camera
 from vlocbench.sim.conditions import Conditions
@@ -37,7 +37,7 @@ class QueryRenderer:
         self.camera = episode_camera(config)
         self.sim = Simulator(town_named(config["town"]), static)
 
-    def image(self, x_m: float, y_m: float, yaw_rad: float, time_s: float) -> Array:
+    def image(self, x_m: float, y_m: float, yaw_rad: float, time_s: float) -> Image:
         """(H, W, 3) uint8 RGB with the car at (x, y, yaw) and the episode's noise at ``time_s``."""
         self.sim.teleport(float(x_m), float(y_m), float(yaw_rad))
         return self.sim.render([self.camera], frame_id=round(time_s / self.sim.dt_s))[0].image

@@ -151,7 +151,7 @@ def _cell(key: tuple[str, str, str], group: list[EpisodeRow], errors: int) -> Ce
             for name, metric in METRICS.items()
         },
         drift=pooled_drift([seg for m in fail for seg in m.drift_segments]),
-        sites_xy=tuple(tuple(xy) for m in fail for xy in m.failure_sites_xy),
+        sites_xy=tuple((float(x), float(y)) for m in fail for x, y in m.failure_sites_xy),
         errors=errors,
         keys=frozenset(r.key for r in group),
     )

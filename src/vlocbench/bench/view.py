@@ -28,7 +28,7 @@ from vlocbench.bench.towns import route_named, town_named
 from vlocbench.bench.visual import camera_model
 from vlocbench.errors import MachineError
 from vlocbench.geometry import planar_pose
-from vlocbench.interfaces import Array
+from vlocbench.interfaces import Array, Image
 from vlocbench.sim.town import Town
 
 VIEW_DIR = "view"  # recordings go to OUTPUT/view/KEY.rrd by default
@@ -202,7 +202,7 @@ def _log_localizations(
         renderer.close()
 
 
-def _thumbnail(rr: Any, image: Array) -> Any:
+def _thumbnail(rr: Any, image: Image) -> Any:
     """An image at half size as JPEG: a drive's worth of queries stays a few tens of MB."""
     import cv2
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 import time
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from vlocbench.bench.localizer import LocalizationQuery, PoseEstimate
 from vlocbench.geometry import invert_pose
@@ -69,7 +69,7 @@ class VisualLocalizer:
         # where the vehicle would stand to take each of the first camera's retrieved images
         first = query.frames[0].camera.extrinsics.vehicle_from_cam()
         ranked = result.cameras[0].ranked_world_from_cam @ invert_pose(first)
-        attempt = {  # what a failure reports too
+        attempt: dict[str, Any] = {  # what a failure reports too
             "ranked_xyz_m": ranked[:, :3, 3],
             "retrieved": tuple(name for r in result.cameras for name in r.retrieved),
             "stage_s": dict(result.seconds),

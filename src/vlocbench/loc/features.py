@@ -62,7 +62,7 @@ def check_image(image: object, what: str = "image") -> NDArray[np.uint8]:
 
 
 def _gray(image: NDArray[np.uint8]) -> NDArray[np.uint8]:
-    return cv2.cvtColor(check_image(image), cv2.COLOR_RGB2GRAY)
+    return np.asarray(cv2.cvtColor(check_image(image), cv2.COLOR_RGB2GRAY), np.uint8)
 
 
 def _strongest(kps: tuple[cv2.KeyPoint, ...], n: int) -> NDArray[np.int64]:
@@ -135,7 +135,8 @@ class SiftExtractor:
         name: str = "sift",
     ) -> None:
         self.name, self.max_keypoints, self.root = name, max_keypoints, root
-        self._sift = cv2.SIFT_create(contrastThreshold=contrast_threshold)
+        # OpenCV 5's type stubs lack its feature factories (they exist at run time)
+        self._sift = cv2.SIFT_create(contrastThreshold=contrast_threshold)  # type: ignore[attr-defined]
 
     def extract(self, image: NDArray[np.uint8]) -> Features:
         kps, desc = self._sift.detectAndCompute(_gray(image), None)  # one scale space for both
@@ -158,10 +159,12 @@ class OrbTeblidExtractor:
 
     def __init__(self, max_keypoints: int = 2048, name: str = "orb-teblid") -> None:
         self.name, self.max_keypoints = name, max_keypoints
-        self._orb = cv2.ORB_create(
+        self._orb = cv2.ORB_create(  # type: ignore[attr-defined]
             nfeatures=max_keypoints, scaleFactor=1.2, nlevels=8, fastThreshold=10
         )
-        self._teblid = cv2.xfeatures2d.TEBLID_create(1.0, cv2.xfeatures2d.TEBLID_SIZE_256_BITS)
+        self._teblid = cv2.xfeatures2d.TEBLID_create(  # type: ignore[attr-defined]
+            1.0, cv2.xfeatures2d.TEBLID_SIZE_256_BITS
+        )
 
     def extract(self, image: NDArray[np.uint8]) -> Features:
         gray = _gray(image)

@@ -25,6 +25,7 @@ from numpy.typing import NDArray
 
 from vlocbench.errors import LocalizationError
 from vlocbench.interfaces import Array
+from vlocbench.loc.features import check_image
 
 GALLERY_FILE = "gallery.json"
 IMAGE_DIR = "images"
@@ -85,7 +86,7 @@ class Gallery:
         bgr = cv2.imread(str(path), cv2.IMREAD_COLOR)
         if bgr is None:
             raise LocalizationError(f"gallery image {path} is missing or unreadable")
-        return bgr[:, :, ::-1].copy()
+        return check_image(bgr[:, :, ::-1], f"gallery image {path}")
 
     @property
     def identity(self) -> str:

@@ -230,7 +230,8 @@ class LightGlueMatcher:
             "flash": False,
             "weights": None,  # else kornia looks for (or downloads) them; ours come from packages
         }
-        net = KF.LightGlue(features=None, **conf)
+        # no named features: the weights are loaded below (kornia's stub says str, it takes None)
+        net = KF.LightGlue(features=None, **conf)  # type: ignore[arg-type]
         package, parts = _MATCHER_WEIGHTS[features]
         state = _load(_weights(package, *parts))
         # the released files name the layers the old way; LighterGlue's file also holds XFeat
@@ -358,7 +359,7 @@ class EfficientNetGem:
             (self.width, round(h * self.width / w)),
             interpolation=cv2.INTER_AREA,
         )
-        x = _tensor(small, self.device)
+        x = _tensor(np.asarray(small, np.uint8), self.device)
         with _inference():  # the image's statistics too: a reduction, so on TORCH_THREADS
             if self.input_norm == "image":
                 mean = x.mean(dim=(2, 3), keepdim=True)

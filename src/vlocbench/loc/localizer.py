@@ -229,7 +229,7 @@ class MapLocalizer:
             if prior_world_from_cam is None:
                 raise LocalizationError("pose-prior retrieval needs a prior pose")
             return nearest_poses(self.poses, prior_world_from_cam, k, c.prior_max_angle_deg)
-        assert self.global_descriptors is not None
+        assert self.descriptor is not None and self.global_descriptors is not None
         return top_k(self.descriptor.describe(image, feats), self.global_descriptors, k)
 
     def _clusters(self, retrieved: NDArray[np.int64]) -> list[list[int]]:
@@ -241,7 +241,9 @@ class MapLocalizer:
             merged = [i] + [j for c in joined for j in c]
             clusters = [c for c in clusters if c not in joined] + [merged]
         order = {int(i): k for k, i in enumerate(retrieved)}
-        return sorted((sorted(c, key=order.get) for c in clusters), key=lambda c: order[c[0]])
+        return sorted(
+            (sorted(c, key=order.__getitem__) for c in clusters), key=lambda c: order[c[0]]
+        )
 
     def localize(
         self,

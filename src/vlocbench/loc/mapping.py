@@ -264,7 +264,8 @@ def _global(
     if overwrite or not state_path.exists():
         with features.reading() as read:
             descriptor.fit([read(n) for n in gallery.names])
-        np.savez(state_path, **descriptor.state())
+        # numpy's stub reads the arrays as its allow_pickle flag
+        np.savez(state_path, **descriptor.state())  # type: ignore[arg-type]
         store_path.unlink(missing_ok=True)
     else:
         with np.load(state_path) as state:

@@ -69,7 +69,8 @@ class Vlad:
         k = min(self.clusters, len(desc))
         cv2.setRNGSeed(self.seed)
         criteria = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_MAX_ITER, 30, 1e-4)
-        _, _, centers = cv2.kmeans(desc, k, None, criteria, 2, cv2.KMEANS_PP_CENTERS)
+        # no initial labels (None), which OpenCV's stub does not allow for
+        _, _, centers = cv2.kmeans(desc, k, None, criteria, 2, cv2.KMEANS_PP_CENTERS)  # type: ignore[call-overload]
         self.centers = centers.astype(np.float32)
 
     def state(self) -> dict[str, np.ndarray]:

@@ -28,6 +28,7 @@ from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
+from numpy.typing import NDArray
 
 from vlocbench.config import require, require_one_of
 from vlocbench.geometry import wrap_angle
@@ -231,7 +232,9 @@ class Ekf:
         r = np.array([odometry.speed_mps, odometry.yaw_rate_radps]) - self.x[3:5]
         self._correct(_H_TWIST, r, R)
 
-    def _correct(self, H: Array, r: Array, R: Array, S_inv: Array | None = None) -> None:
+    def _correct(
+        self, H: Array, r: Array, R: Array, S_inv: NDArray[np.floating] | None = None
+    ) -> None:
         if S_inv is None:
             S_inv = np.linalg.inv(H @ self.P @ H.T + R)
         K = self.P @ H.T @ S_inv

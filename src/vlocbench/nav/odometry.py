@@ -109,5 +109,5 @@ def dead_reckoning_drift(
     return Drift(
         distance_m=distance,
         position_error_m=float(np.hypot(x - end[0], y - end[1])),
-        yaw_error_deg=float(np.degrees(abs(wrap_angle(yaw - end[2])))),
+        yaw_error_deg=float(np.degrees(np.abs(wrap_angle(yaw - end[2])))),
     )

@@ -70,7 +70,7 @@ class WaypointPath:
 
     def index_at(self, s_m: float) -> int:
         """The first waypoint at arc length >= ``s_m`` (the last one past the end)."""
-        return int(min(np.searchsorted(self.s_m, s_m - 1e-9), len(self.xy) - 1))
+        return min(int(np.searchsorted(self.s_m, s_m - 1e-9)), len(self.xy) - 1)
 
     def window(self, s_m: float, behind_m: float, ahead_m: float) -> tuple[int, int]:
         """Segment range [first, last) covering arc lengths ``s_m - behind_m`` .. ``s_m + ahead_m``."""

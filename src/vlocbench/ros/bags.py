@@ -173,12 +173,12 @@ def write_episode_bag(
         truths = vehicle_poses(
             *(locs[c][answered] for c in ("true_x_m", "true_y_m", "true_yaw_rad"))
         )
-        for k, estimate, truth in zip(
+        for answer, estimate, truth in zip(
             answered, estimate_poses(locs, answered), truths, strict=True
         ):
-            t = locs["time_s"][k]
-            arrival = t + locs["latency_s"][k]
-            covariance = _answer_covariance(locs, k, default)
+            t = locs["time_s"][answer]
+            arrival = t + locs["latency_s"][answer]
+            covariance = _answer_covariance(locs, int(answer), default)
             messages.append(
                 (arrival, "/visual_pose_estimate", _pose_stamped(t, _pose(estimate), covariance))
             )

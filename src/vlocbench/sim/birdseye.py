@@ -60,8 +60,10 @@ def draw_town(ax: Axes, town: Town, route: bool = True) -> None:
     if route:
         wp = town.route.waypoints_xy
         ax.plot(wp[:, 0], wp[:, 1], color=COLORS["route"], lw=2.0, zorder=6)
-        ax.scatter(*wp[0], s=60, c="#2ca02c", zorder=7, label="start", edgecolors="k")
-        ax.scatter(*wp[-1], s=60, c=COLORS["route"], marker="X", zorder=7, label="goal")
+        ax.scatter(wp[0][0], wp[0][1], s=60, c="#2ca02c", zorder=7, label="start", edgecolors="k")
+        ax.scatter(
+            wp[-1][0], wp[-1][1], s=60, c=COLORS["route"], marker="X", zorder=7, label="goal"
+        )
     ax.set_xlim(x0, x1)
     ax.set_ylim(y0, y1)
     ax.set_aspect("equal")

@@ -42,8 +42,8 @@ def apply_rain(image: Image, amount: float, brightness: float, rng: np.random.Ge
     slant = rng.normal(0.15, 0.03)
     for x, y, length in zip(xs, ys, lengths):
         cv2.line(layer, (int(x), int(y)), (int(x + slant * length), int(y + length)), 1.0, 1)
-    layer = cv2.GaussianBlur(layer, (3, 3), 0)
-    out += layer[..., None] * 255 * (0.25 + 0.35 * brightness)
+    blurred_layer = cv2.GaussianBlur(layer, (3, 3), 0)
+    out += blurred_layer[..., None] * 255 * (0.25 + 0.35 * brightness)
     # drops on the lens: blurred, slightly brighter discs
     for _ in range(int(amount * 14)):
         x, y = int(rng.integers(0, w)), int(rng.integers(0, h))
@@ -51,16 +51,16 @@ def apply_rain(image: Image, amount: float, brightness: float, rng: np.random.Ge
         x0, x1, y0, y1 = max(0, x - r), min(w, x + r), max(0, y - r), min(h, y + r)
         patch = out[y0:y1, x0:x1]
         blurred = cv2.GaussianBlur(patch, (0, 0), r / 2)
-        mask = np.zeros(patch.shape[:2], np.float32)
-        cv2.circle(mask, (x - x0, y - y0), r, 1.0, -1)
-        mask = cv2.GaussianBlur(mask, (0, 0), max(1, r / 4))[..., None]
+        disc = np.zeros(patch.shape[:2], np.float32)
+        cv2.circle(disc, (x - x0, y - y0), r, 1.0, -1)
+        mask = cv2.GaussianBlur(disc, (0, 0), max(1, r / 4))[..., None]
         out[y0:y1, x0:x1] = patch * (1 - mask) + (blurred * 1.05 + 6) * mask
     out += rng.normal(0, 2 + 3 * amount, (h, w, 1))
     return np.clip(out, 0, 255).astype(np.uint8)
 
 
 @functools.lru_cache(maxsize=8)
-def _puddle_field(seed: int) -> tuple[NDArray[np.float32], NDArray[np.float64]]:
+def _puddle_field(seed: int) -> tuple[NDArray[np.float32], NDArray[np.floating]]:
     """A town's static noise (two octaves of value noise on a 256-cell torus: puddles lie where
     they lie, as CARLA's) and its quantiles, to turn a share of the road into a threshold."""
     table = np.random.default_rng(seed).random((256, 256)).astype(np.float32)
@@ -69,8 +69,8 @@ def _puddle_field(seed: int) -> tuple[NDArray[np.float32], NDArray[np.float64]]:
     return table, quantiles
 
 
-def _noise(table: NDArray[np.float32], x_m: Array, y_m: Array) -> Array:
-    out = np.zeros(np.shape(x_m), np.float32)
+def _noise(table: NDArray[np.float32], x_m: Array, y_m: Array) -> NDArray[np.float32]:
+    out: NDArray[np.float32] = np.zeros(np.shape(x_m), np.float32)
     for octave, weight in ((1.0, 0.7), (0.4, 0.3)):  # cells of 2.5 m and 1 m
         u, v = (
             np.asarray(x_m) / (PUDDLE_CELL_M * octave),
@@ -85,7 +85,7 @@ def _noise(table: NDArray[np.float32], x_m: Array, y_m: Array) -> Array:
     return out
 
 
-def puddle_mask(x_m: Array, y_m: Array, deposits: float, seed: int) -> Array:
+def puddle_mask(x_m: Array, y_m: Array, deposits: float, seed: int) -> NDArray[np.bool_]:
     """Where the road is under water (bool, the shape of ``x_m``): ``PUDDLE_MAX_SHARE *
     deposits`` of it, at the same places in every image of a town (``seed``)."""
     if deposits <= 0:

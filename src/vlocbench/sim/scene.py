@@ -749,7 +749,8 @@ class _SceneBuilder:
         for k in range(self.options.max_pedestrians):
             scene.set_free_pose(scene.pedestrian_qpos_adr[k], 0.0, 0.0, 0.0, -50.0)
         route = self.town.route
-        scene.set_free_pose(scene.ego_qpos_adr, *route.waypoints_xy[0], route.yaw_rad[0])
+        x_m, y_m = route.waypoints_xy[0]
+        scene.set_free_pose(scene.ego_qpos_adr, float(x_m), float(y_m), float(route.yaw_rad[0]))
         scene.forward()
         return scene
 

@@ -453,15 +453,17 @@ def sign_atlas(rng: np.random.Generator) -> Image:
                 (cx + 56 * np.cos(a), cy + 56 * np.sin(a))
                 for a in np.arange(8) * np.pi / 4 + np.pi / 8
             ]
-            cv2.fillPoly(img, [np.int32(pts)], (200, 20, 25))
+            cv2.fillPoly(img, [np.array(pts, np.int32)], (200, 20, 25))
             cv2.putText(
                 img, "STOP", (cx - 44, cy + 12), cv2.FONT_HERSHEY_DUPLEX, 1.1, (250,) * 3, 2
             )
         elif k == 1:  # yield
             pts = [(cx - 56, cy - 48), (cx + 56, cy - 48), (cx, cy + 52)]
-            cv2.fillPoly(img, [np.int32(pts)], (200, 20, 25))
+            cv2.fillPoly(img, [np.array(pts, np.int32)], (200, 20, 25))
             cv2.fillPoly(
-                img, [np.int32([(cx - 34, cy - 34), (cx + 34, cy - 34), (cx, cy + 26)])], (250,) * 3
+                img,
+                [np.array([(cx - 34, cy - 34), (cx + 34, cy - 34), (cx, cy + 26)], np.int32)],
+                (250,) * 3,
             )
         elif k in (2, 3, 4):  # speed limits
             cv2.circle(img, (cx, cy), 58, (200, 20, 25), -1)
@@ -481,7 +483,9 @@ def sign_atlas(rng: np.random.Generator) -> Image:
         elif k == 6:  # pedestrian crossing
             cv2.rectangle(img, (cx - 56, cy - 56), (cx + 56, cy + 56), (30, 80, 200), -1)
             cv2.fillPoly(
-                img, [np.int32([(cx - 40, cy + 40), (cx + 40, cy + 40), (cx, cy - 44)])], (250,) * 3
+                img,
+                [np.array([(cx - 40, cy + 40), (cx + 40, cy + 40), (cx, cy - 44)], np.int32)],
+                (250,) * 3,
             )
             cv2.circle(img, (cx, cy - 8), 8, (20, 20, 20), -1)
             cv2.line(img, (cx, cy), (cx - 10, cy + 30), (20, 20, 20), 4)

@@ -90,8 +90,8 @@ def _paper_failure_table(
         rows.append(
             ["vlocbench", method_label(method), *(fmt(f[ours_levels.index(lv)]) for lv in shared)]
         )
-    for method, f in table.failure_rate[name].items():
-        rows.append(["paper", method, *(fmt(f[table.levels.index(lv)]) for lv in shared)])
+    for method, paper_f in table.failure_rate[name].items():
+        rows.append(["paper", method, *(fmt(paper_f[table.levels.index(lv)]) for lv in shared)])
     rows.append(
         ["paper", "odometry only", *(fmt(paper.odometry_failure_rate[name]) for _ in shared)]
     )
@@ -111,8 +111,10 @@ def _paper_recall_table(
     for method in (m for m in summary.methods if m != BASELINE):
         _, t1 = ours_per_setup(summary, town, method)
         rows.append(["vlocbench", method, *(fmt(t1[ours_levels.index(lv)]) for lv in shared)])
-    for method, t1 in table.recall_t1[name].items():
-        rows.append(["paper", method, *(fmt(t1[table.recall_levels.index(lv)]) for lv in shared)])
+    for method, paper_t1 in table.recall_t1[name].items():
+        rows.append(
+            ["paper", method, *(fmt(paper_t1[table.recall_levels.index(lv)]) for lv in shared)]
+        )
     return f"{name}: T1 recall (%, 6-DoF, ground-truth drive) beside the paper's", (header, rows)
 
 
@@ -135,11 +137,15 @@ def _paper_shape_table(
     for method in (m for m in summary.methods if m != BASELINE):
         f, t1 = ours_per_setup(summary, town, method)
         rows.append(["vlocbench", method, *_shape_cells(shape(f, odo, None, t1), ours_levels)])
-    for method, f in table.failure_rate[name].items():
+    for method, paper_f in table.failure_rate[name].items():
         t1_by_level = dict(zip(table.recall_levels, table.recall_t1.get(name, {}).get(method, ())))
-        t1 = [t1_by_level.get(lv, float("nan")) for lv in table.levels]
+        paper_t1 = [t1_by_level.get(lv, float("nan")) for lv in table.levels]
         rows.append(
-            ["paper", method, *_shape_cells(shape(f, paper_odo, None, t1), list(table.levels))]
+            [
+                "paper",
+                method,
+                *_shape_cells(shape(paper_f, paper_odo, None, paper_t1), list(table.levels)),
+            ]
         )
     return (
         f"{name}: shape of F over the levels, ours (odometry only {fmt(odo)}/km) and the "

@@ -100,12 +100,12 @@ def paper_failure_figure(summary: Summary, town: str, path: Path) -> Path | None
                 pts.append((i, c.failure.mean, c.failure.low, c.failure.high))
         if not pts:
             continue
-        i, mean, low, high = (np.array(v) for v in zip(*sorted(pts)))
+        level, mean, low, high = (np.array(v) for v in zip(*sorted(pts)))
         if method == BASELINE:
             ax.axhline(float(np.mean(mean)), ls="-", color="0.3", lw=1.5, label="odometry only")
             continue
         ax.errorbar(
-            i,
+            level,
             mean,
             yerr=[mean - low, high - mean],
             fmt="o-",
