@@ -3,7 +3,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 JOBS ?= 2
 
-.PHONY: demo test lint format bench setup
+.PHONY: demo test lint format bench setup docs
 
 demo:
 	@scripts/setup.sh
@@ -14,6 +14,7 @@ test:
 	$(VENV)/bin/ruff check src tests benchmarks
 	$(VENV)/bin/ruff format --check src tests benchmarks
 	$(PY) -m mypy
+	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict --quiet
 	$(PY) -m pytest -n $(JOBS) -q
 
 lint:
@@ -28,3 +29,7 @@ format:
 bench:
 	@scripts/setup.sh
 	for b in benchmarks/bench_*.py; do $(PY) $$b; done
+
+docs:
+	@scripts/setup.sh test
+	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs serve

@@ -21,7 +21,7 @@ from vlocbench.bench.records import (
     Segment,
     Trajectory,
 )
-from vlocbench.bench.store import ResultStore
+from vlocbench.bench.store import ResultStore, run_hash
 from vlocbench.bench.worker import EpisodeOutcome
 from vlocbench.config import to_dict
 
@@ -159,7 +159,7 @@ def run_fake_plans(root, *plans):
     with ResultStore(root, "ill") as store:
         for plan in plans:
             tasks = [t.on_maps(fake_maps(plan)) for t in plan.tasks()]
-            store.start_run(plan.spec.spec_hash, to_dict(plan), [t.key for t in tasks])
+            store.start_run(run_hash(t.key for t in tasks), to_dict(plan), [t.key for t in tasks])
             todo = [t for t in tasks if t.key not in store.done_keys()]
             execute(todo, store, workers=1, runner=run_fake, progress=False)
 

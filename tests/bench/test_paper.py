@@ -6,7 +6,7 @@ from vlocbench.bench.executors import execute
 from vlocbench.bench.experiment import load_experiment, plan_from_stored
 from vlocbench.bench.paper import paper_results, shape, spearman
 from vlocbench.bench.report.comparison import paper_comparison_tables
-from vlocbench.bench.store import ResultStore, read_latest_run
+from vlocbench.bench.store import ResultStore, read_latest_run, run_hash
 from vlocbench.bench.summary import summarize
 from vlocbench.config import to_dict
 
@@ -55,7 +55,7 @@ def test_a_run_is_reported_beside_the_paper(tmp_path):
     )
     tasks = spec.tasks()
     with ResultStore(tmp_path, "ill") as store:
-        store.start_run(spec.spec.spec_hash, to_dict(spec), [t.key for t in tasks])
+        store.start_run(run_hash(t.key for t in tasks), to_dict(spec), [t.key for t in tasks])
         execute(tasks, store, workers=1, runner=run_fake, progress=False)
     stored, rows = read_latest_run(tmp_path)
     tables = dict(paper_comparison_tables(summarize(plan_from_stored(stored), rows)))

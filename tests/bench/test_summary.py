@@ -4,7 +4,7 @@ earlier run of another sweep or of an older EPISODE_VERSION."""
 from tests.bench.fakes import ILL_SPEC, run_fake, run_fake_plans
 from vlocbench.bench.executors import execute
 from vlocbench.bench.experiment import load_experiment, plan_from_stored
-from vlocbench.bench.store import ResultStore, read_latest_run
+from vlocbench.bench.store import ResultStore, read_episodes, read_latest_run, run_hash
 from vlocbench.bench.summary import summarize
 from vlocbench.config import to_dict
 
@@ -23,7 +23,7 @@ def test_a_grouped_sweep_whose_keys_are_not_sorted_reports_every_cell(tmp_path):
     )
     tasks = spec.tasks()
     with ResultStore(tmp_path, "wx") as store:
-        store.start_run(spec.spec.spec_hash, to_dict(spec), [t.key for t in tasks])
+        store.start_run(run_hash(t.key for t in tasks), to_dict(spec), [t.key for t in tasks])
         execute(tasks, store, workers=1, runner=run_fake, progress=False)
     stored, rows = read_latest_run(tmp_path)
     summary = summarize(plan_from_stored(stored), rows)
@@ -67,3 +67,20 @@ def test_an_old_runs_report_shows_its_episodes_where_they_were_stored(tmp_path, 
         for method in ("sift-vlad", "odometry"):
             cell = summary.cell("town10", method, label)
             assert cell is not None and cell.failure is not None, (method, label)
+
+
+def test_a_rerun_under_a_new_episode_version_reports_only_its_own_episodes(tmp_path, monkeypatch):
+    """The same experiment file run again after EPISODE_VERSION changed: the old episodes stay in
+    the store, and the latest run's report holds the new ones only, never both."""
+    import vlocbench.bench.experiment as experiment
+
+    spec = {**ILL_SPEC, "sweep": {"illumination.k": [0, 6]}}
+    run_fake_plans(tmp_path, load_experiment(spec))
+    monkeypatch.setattr(experiment, "EPISODE_VERSION", experiment.EPISODE_VERSION + 1)
+    plan = load_experiment(spec)
+    run_fake_plans(tmp_path, plan)
+    stored, rows = read_latest_run(tmp_path)
+    keys = {t.key for t in plan.tasks()}
+    assert {r.key for r in rows} == keys and len(read_episodes(tmp_path)) == 2 * len(keys)
+    summary = summarize(plan_from_stored(stored), rows)
+    assert summary.episodes == summary.planned == len(keys)

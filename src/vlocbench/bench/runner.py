@@ -14,7 +14,7 @@ from vlocbench.bench.executors import Runner, check_workers, execute
 from vlocbench.bench.experiment import EpisodeTask, ExperimentPlan
 from vlocbench.bench.methods import check_methods
 from vlocbench.bench.preparation import prepare_maps
-from vlocbench.bench.store import ResultStore, StoreError
+from vlocbench.bench.store import ResultStore, StoreError, run_hash
 from vlocbench.bench.worker import run_task
 from vlocbench.config import to_dict
 
@@ -67,7 +67,8 @@ def run_experiment(
         maps = prepare_maps(plan, progress, workers if scheduler is None else 1)
         tasks = [t.on_maps(maps) for t in plan.tasks()]
         _check_galleries(tasks, store)
-        store.start_run(plan.spec.spec_hash, to_dict(plan), [t.key for t in tasks])
+        keys = [t.key for t in tasks]
+        store.start_run(run_hash(keys), to_dict(plan), keys)
         done = store.done_keys()
         todo = [t for t in tasks if t.key not in done]
         logger.info(

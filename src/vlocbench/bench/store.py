@@ -18,12 +18,13 @@ from __future__ import annotations
 import dataclasses
 import errno
 import fcntl
+import hashlib
 import json
 import os
 import shutil
 import sqlite3
 import time
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -76,6 +77,13 @@ class EpisodeRow:
     metrics: EpisodeMetrics | None  # None: the episode ended in an error
     wall_s: float | None
     attempts: int
+
+
+def run_hash(keys: Iterable[str]) -> str:
+    """A run's identity: the set of its episodes' keys. The same experiment with a setting, or
+    EPISODE_VERSION, changed is another run, so its report never mixes in the other's episodes
+    (its own rows are still in the store, found by key)."""
+    return hashlib.sha1(" ".join(sorted(set(keys))).encode()).hexdigest()[:16]
 
 
 def strict_json(value: Any) -> str:

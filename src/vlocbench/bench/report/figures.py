@@ -85,9 +85,20 @@ def paper_failure_figure(summary: Summary, town: str, path: Path) -> Path | None
     table, ours_levels = found
     paper = paper_results()
     x = np.arange(len(table.levels))
-    fig, ax = plt.subplots(figsize=(7.5, 4.2))
+    fig, ax = plt.subplots(figsize=(9.5, 4.2))
+    ours = " ".join(summary.methods).lower()
     for (method, f), color in zip(table.failure_rate[name].items(), PAPER_COLORS * 4):
-        ax.plot(x, f, "--", color=color, lw=1.2, alpha=0.8, label=f"paper: {method}")
+        # the paper's methods with the local features of one of ours stand out
+        same = method.split(" + ")[-1].lower() in ours
+        ax.plot(
+            x,
+            f,
+            "--",
+            color=color,
+            lw=2.0 if same else 1.0,
+            alpha=1.0 if same else 0.6,
+            label=f"paper: {method}",
+        )
     ax.axhline(
         paper.odometry_failure_rate[name], ls=":", color="0.5", lw=1.2, label="paper: odometry only"
     )
@@ -131,7 +142,7 @@ def paper_failure_figure(summary: Summary, town: str, path: Path) -> Path | None
     ax.set_ylim(bottom=0)
     ax.set_title(f"{name}: failure rate, vlocbench (solid) and the paper (dashed)")
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=7, ncol=2)
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     return _save(fig, path)
 
 
