@@ -166,6 +166,10 @@ def test_bad_experiments_are_clear_errors(tmp_path):
         _spec(repetitions=0)
     with pytest.raises(ConfigError, match="baseline_repetitions: must be >= 1"):
         _spec(baseline_repetitions=0)
+    with pytest.raises(
+        ConfigError, match=r"route_length_m: 99999 m is longer than town10's route \(489 m\)"
+    ):
+        _spec(route_length_m=99999)
     with pytest.raises(ConfigError, match="methods: recall and failure episodes need"):
         _spec(methods=[])
     with pytest.raises(

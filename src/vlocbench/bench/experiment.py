@@ -29,6 +29,7 @@ from typing import Any, Literal
 
 from vlocbench.bench.episode import EPISODE_VERSION, EpisodeConfig
 from vlocbench.bench.methods import MethodSpec
+from vlocbench.bench.towns import route_named
 from vlocbench.config import config_hash, from_dict, load_yaml, require, to_dict
 from vlocbench.errors import ConfigError, UnknownNameError
 from vlocbench.loc.mapping import MappingConfig, map_name
@@ -190,6 +191,13 @@ def resolve(spec: ExperimentSpec) -> ExperimentPlan:
     """The plan of a validated spec: every town checked, every sweep point resolved."""
     for town in spec.towns:
         _town_spec(town)
+        if spec.route_length_m > 0:  # a cut longer than the route would silently drive it whole
+            route_m = route_named(town).length_m
+            require(
+                spec.route_length_m <= route_m,
+                "route_length_m",
+                f"{spec.route_length_m:g} m is longer than {town}'s route ({route_m:.0f} m)",
+            )
     sweep = _sweep_levels(spec)
     return ExperimentPlan(
         spec=spec,
