@@ -2,6 +2,7 @@ import os
 import signal
 import subprocess
 import sys
+import time
 
 import pytest
 import yaml
@@ -223,3 +224,35 @@ def test_build_map_stops_cleanly_on_a_signal_and_a_rerun_finishes(gallery, tmp_p
     assert not (out / "map.json").exists()
     assert subprocess.run(cmd, capture_output=True, text=True, check=True).returncode == 0
     assert (out / "map.json").exists()
+
+
+@pytest.mark.parametrize("stop", [signal.SIGINT, signal.SIGTERM])
+def test_gallery_capture_stops_cleanly_on_a_signal(tmp_path, stop):
+    """Sent once images are being written (the renderer and pycolmap loaded): exit 130, no
+    native stack trace, and no gallery index: the folder is not taken for a finished gallery."""
+    out = tmp_path / "gallery"
+    cmd = [
+        sys.executable,
+        "-m",
+        "vlocbench.cli",
+        "gallery",
+        "capture",
+        "town10",
+        "--out",
+        str(out),
+        "--width",
+        "160",
+        "--height",
+        "120",
+    ]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120
+    while len(list(out.glob("images/*"))) < 3:
+        assert proc.poll() is None and time.monotonic() < deadline, proc.stderr.read()
+        time.sleep(0.1)
+    proc.send_signal(stop)
+    code = proc.wait(timeout=60)
+    err = proc.stderr.read()
+    assert code == 130, err
+    assert "Aborted" not in err and "stack trace" not in err, err
+    assert not (out / "gallery.json").exists()
