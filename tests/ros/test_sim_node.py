@@ -1,3 +1,8 @@
+import os
+import signal
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 import yaml
@@ -91,3 +96,29 @@ def test_a_bad_world_file_names_the_field(world, tmp_path):
         ConfigError, match="unknown keys \\['lights'\\]; valid: cameras, conditions"
     ):
         load_world(world[0], bad)
+
+
+@pytest.mark.parametrize("stop", [signal.SIGINT, signal.SIGTERM])
+def test_the_cli_sim_node_stops_cleanly(ros_context, ros_env, world, stop):
+    """`vlocbench ros sim` from its own process, once it publishes images (the renderer and the
+    native libraries loaded): both signals end it with 0 and no native stack trace."""
+    town, config = world
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "vlocbench.cli", "ros", "sim", town, "--config", str(config)],
+        env={**os.environ, **ros_env},
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        probe = Node("probe", context=ros_context)
+        images = []
+        probe.create_subscription(Image, "right/image", images.append, 10)
+        executor = SingleThreadedExecutor(context=ros_context)
+        executor.add_node(probe)
+        spin_until(executor, lambda: images, 60)
+    finally:
+        proc.send_signal(stop)
+        code = proc.wait(timeout=30)
+    err = proc.stderr.read()
+    assert code == 0, err
+    assert "Aborted" not in err and "stack trace" not in err, err
