@@ -134,3 +134,14 @@ def tiny(tmp_path_factory):
     (root / "tiny.yaml").write_text(yaml.safe_dump(spec))
     summary = run_experiment(load_experiment(root / "tiny.yaml"), progress=False)
     return root, summary
+
+
+def assert_stops_cleanly(proc, stop: int, code: int) -> str:
+    """Send ``stop`` to the subprocess ``proc`` (stderr piped, text): it exits with ``code`` and
+    prints no native stack trace (glog's failure handler). Returns its stderr."""
+    proc.send_signal(stop)
+    got = proc.wait(timeout=60)
+    err = proc.stderr.read()
+    assert got == code, err
+    assert "Aborted" not in err and "stack trace" not in err, err
+    return err

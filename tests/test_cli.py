@@ -7,6 +7,7 @@ import time
 import pytest
 import yaml
 
+from tests.conftest import assert_stops_cleanly
 from vlocbench.cli import build_parser, main
 
 
@@ -216,11 +217,7 @@ def test_build_map_stops_cleanly_on_a_signal_and_a_rerun_finishes(gallery, tmp_p
     for line in proc.stdout:  # the features are extracted: the native libraries are loaded
         if line.strip().startswith("matches") or ("features" in line and "/" in line):
             break
-    proc.send_signal(stop)
-    code = proc.wait(timeout=60)
-    err = proc.stderr.read()
-    assert code == 130, err
-    assert "interrupted" in err and "Aborted" not in err and "stack trace" not in err, err
+    assert "interrupted" in assert_stops_cleanly(proc, stop, 130)
     assert not (out / "map.json").exists()
     assert subprocess.run(cmd, capture_output=True, text=True, check=True).returncode == 0
     assert (out / "map.json").exists()
@@ -250,9 +247,5 @@ def test_gallery_capture_stops_cleanly_on_a_signal(tmp_path, stop):
     while len(list(out.glob("images/*"))) < 3:
         assert proc.poll() is None and time.monotonic() < deadline, proc.stderr.read()
         time.sleep(0.1)
-    proc.send_signal(stop)
-    code = proc.wait(timeout=60)
-    err = proc.stderr.read()
-    assert code == 130, err
-    assert "Aborted" not in err and "stack trace" not in err, err
+    assert_stops_cleanly(proc, stop, 130)
     assert not (out / "gallery.json").exists()

@@ -13,7 +13,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import CameraInfo, Image
 
-from tests.conftest import CAMERA
+from tests.conftest import CAMERA, assert_stops_cleanly
 from tests.ros.conftest import spin_until
 from vlocbench.bench.visual import camera_model
 from vlocbench.errors import UnknownNameError
@@ -166,8 +166,4 @@ def test_the_cli_node_answers_from_its_own_process_and_stops_cleanly(
         )
         assert position_m <= 0.25 and rotation_deg <= 2.0
     finally:
-        proc.send_signal(stop)
-        code = proc.wait(timeout=30)
-    err = proc.stderr.read()
-    assert code == 0, err
-    assert "Aborted" not in err and "stack trace" not in err, err
+        assert_stops_cleanly(proc, stop, 0)

@@ -16,7 +16,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import CameraInfo, Image
 
-from tests.conftest import small_spec
+from tests.conftest import assert_stops_cleanly, small_spec
 from tests.ros.conftest import spin_until
 from vlocbench.config import to_dict
 from vlocbench.errors import ConfigError
@@ -117,8 +117,4 @@ def test_the_cli_sim_node_stops_cleanly(ros_context, ros_env, world, stop):
         executor.add_node(probe)
         spin_until(executor, lambda: images, 60)
     finally:
-        proc.send_signal(stop)
-        code = proc.wait(timeout=30)
-    err = proc.stderr.read()
-    assert code == 0, err
-    assert "Aborted" not in err and "stack trace" not in err, err
+        assert_stops_cleanly(proc, stop, 0)
