@@ -25,10 +25,11 @@ import itertools
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
 from vlocbench.bench.episode import EPISODE_VERSION, EpisodeConfig
 from vlocbench.bench.methods import MethodSpec
+from vlocbench.bench.records import EpisodeKind
 from vlocbench.bench.towns import route_named
 from vlocbench.config import config_hash, from_dict, load_yaml, require, to_dict
 from vlocbench.errors import ConfigError, UnknownNameError
@@ -37,7 +38,6 @@ from vlocbench.sim import Camera, Conditions, builtin_town_names, gallery_camera
 from vlocbench.sim.scene import SCENE_VERSION
 from vlocbench.sim.town import TownSpec, load_town_spec
 
-EpisodeKind = Literal["recall", "failure", "baseline"]
 _CONDITION_KEYS = tuple(f.name for f in dataclasses.fields(Conditions))
 SWEEP_ROOTS = (*_CONDITION_KEYS, "camera", "cameras", "episode")
 # set per episode by its kind and repetition, so not sweepable

@@ -12,19 +12,17 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, fields
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from vlocbench.bench.records import EpisodeResult, per_km
+from vlocbench.bench.records import EPISODE_KINDS, EpisodeKind, EpisodeResult, per_km
 from vlocbench.config import require_one_of
 from vlocbench.errors import ConfigError
 from vlocbench.geometry import wrap_angle
 from vlocbench.nav import Drift
 
-EpisodeKind = Literal["failure", "recall", "baseline"]
-EPISODE_KINDS = ("failure", "recall", "baseline")
 # (position m, yaw deg): the paper's three plus a coarse (20 m, 180 deg) "right street" level
 RECALL_THRESHOLDS: tuple[tuple[float, float], ...] = (
     (0.25, 2.0),

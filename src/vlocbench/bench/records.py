@@ -3,10 +3,16 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal, get_args
 
 import numpy as np
 
 from vlocbench.interfaces import Array
+
+# an experiment's drives: the ground-truth drive scored for recall, the drive navigated on the
+# method's poses, and the drive on wheel odometry alone
+EpisodeKind = Literal["recall", "failure", "baseline"]
+EPISODE_KINDS: tuple[str, ...] = get_args(EpisodeKind)
 
 
 def per_km(count: float, covered_m: float) -> float:

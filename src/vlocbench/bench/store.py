@@ -18,7 +18,6 @@ from __future__ import annotations
 import dataclasses
 import errno
 import fcntl
-import hashlib
 import json
 import os
 import shutil
@@ -34,6 +33,7 @@ import numpy as np
 
 from vlocbench.bench.metrics import EpisodeMetrics
 from vlocbench.bench.records import EpisodeResult
+from vlocbench.config import config_hash
 from vlocbench.errors import MachineError, VlocbenchError
 
 DB_FILE = "results.sqlite"
@@ -83,7 +83,7 @@ def run_hash(keys: Iterable[str]) -> str:
     """A run's identity: the set of its episodes' keys. The same experiment with a setting, or
     EPISODE_VERSION, changed is another run, so its report never mixes in the other's episodes
     (its own rows are still in the store, found by key)."""
-    return hashlib.sha1(" ".join(sorted(set(keys))).encode()).hexdigest()[:16]
+    return config_hash(sorted(set(keys)), 16)
 
 
 def strict_json(value: Any) -> str:

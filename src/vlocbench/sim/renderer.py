@@ -17,6 +17,7 @@ from numpy.typing import NDArray
 from vlocbench.interfaces import Image
 from vlocbench.sim import textures as tex
 from vlocbench.sim.backend import missing_libraries_error, select_backend
+from vlocbench.sim.camera import Intrinsics
 from vlocbench.sim.conditions import Conditions
 from vlocbench.sim.light import (
     DISPLAY_GAMMA,
@@ -93,13 +94,11 @@ class Renderer:
         self.conditions = conditions or Conditions()
         self._night_z = scene.model.geom_pos[list(scene.night_geom_ids), 2].copy()
         self._window_share = 0.0  # as the scene is built
-        m = scene.model
-        self._facade_ids = [
-            i for n, i in scene.material_ids.items() if n.startswith(("facade", "tower", "shops"))
-        ]
-        self._facade_base = {
-            i: (m.mat_rgba[i, :3].copy(), float(m.mat_specular[i]), float(m.mat_shininess[i]))
-            for i in self._facade_ids
+        # the facades' gloss as built, to wet (their colours as built are scene.base_rgba)
+        self._facade_gloss = {
+            name: (float(scene.model.mat_specular[i]), float(scene.model.mat_shininess[i]))
+            for name, i in scene.material_ids.items()
+            if name.startswith(("facade", "tower", "shops"))
         }
         self.apply(self.conditions)
 
@@ -154,14 +153,15 @@ class Renderer:
                 m.mat_specular[mid] = 0.05 + 0.6 * wet
                 m.mat_shininess[mid] = 0.1 + 0.7 * wet
         # wet walls: darker (water fills the pores) and glossier
-        for mid in self._facade_ids:
-            m.mat_rgba[mid, :3] = self._facade_base[mid][0] * (1 - 0.2 * wet)
-            m.mat_specular[mid] = self._facade_base[mid][1] + 0.3 * wet
-            m.mat_shininess[mid] = self._facade_base[mid][2] + 0.4 * wet * (
-                1 - self._facade_base[mid][2]
-            )
-        zenith, horizon = sky_colors(conditions, self.sky_brightness)
-        self._set_texture(sc.sky_texture_id, tex.sky(tuple(zenith), tuple(horizon), SKY_SIZE))
+        for name, (specular, shininess) in self._facade_gloss.items():
+            mid = sc.material_ids[name]
+            m.mat_rgba[mid, :3] = sc.base_rgba[name][:3] * (1 - 0.2 * wet)
+            m.mat_specular[mid] = specular + 0.3 * wet
+            m.mat_shininess[mid] = shininess + 0.4 * wet * (1 - shininess)
+        zenith, self._sky_horizon = sky_colors(conditions, self.sky_brightness)
+        self._set_texture(
+            sc.sky_texture_id, tex.sky(tuple(zenith), tuple(self._sky_horizon), SKY_SIZE)
+        )
         # lights are drawn from data.light_xdir/xpos, which only mj_camlight derives from the
         # model's light_dir: without this the old sun shone until the next simulation step
         sc.forward()
@@ -297,17 +297,14 @@ class Renderer:
             mujoco.mjr_readPixels(None, depth, r._rect, r._mjr_context)
             # reversed z, as MuJoCo's renderer keeps it: 1 at the near plane, 0 at the far one
             depth_m = FAR_M * NEAR_M / ((FAR_M - NEAR_M) * np.flipud(depth) + NEAR_M)
-            f = width / 2 / np.tan(np.radians(fov_deg) / 2)
-            K = np.array([[f, 0, width / 2 - 0.5], [0, f, height / 2 - 0.5], [0, 0, 1.0]])
-            _, horizon = sky_colors(self.conditions, self.sky_brightness)
             image = apply_puddles(
                 image,
-                depth_m.astype(np.float32),
-                K,
+                depth_m.astype(np.float32, copy=False),
+                Intrinsics(width, height, fov_deg).K,
                 world_from_cam,
                 deposits,
                 sc.town.spec.seed,
-                horizon,
+                self._sky_horizon,
                 np.random.default_rng(seed + 2),
             )
         if rain > 0:
