@@ -126,21 +126,27 @@ def test_a_killed_or_interrupted_run_leaves_no_process_and_a_consistent_store(
             assert store.read_table(key, "trajectory")["time_s"].shape == (50,)
 
 
-def test_dask_cluster_on_loopback(tmp_path, control):
+@pytest.fixture
+def dask_cluster(tmp_path):
+    """Two single-threaded Dask worker processes on loopback."""
     distributed = pytest.importorskip("distributed")
-    tasks = fake_tasks()
-    (control / "die-illumination.k=6-sift-vlad-1").touch()
-    cluster = distributed.LocalCluster(
+    with distributed.LocalCluster(
         n_workers=2,
         threads_per_worker=1,
         processes=True,
         host="127.0.0.1",
         dashboard_address=None,
         local_directory=str(tmp_path / "dask"),
-    )
-    with cluster, ResultStore(tmp_path / "out", "fake") as store:
+    ) as cluster:
+        yield cluster
+
+
+def test_dask_cluster_on_loopback(tmp_path, control, dask_cluster):
+    tasks = fake_tasks()
+    (control / "die-illumination.k=6-sift-vlad-1").touch()
+    with ResultStore(tmp_path / "out", "fake") as store:
         e = execute(
-            tasks, store, scheduler=cluster.scheduler_address, runner=run_fake, progress=False
+            tasks, store, scheduler=dask_cluster.scheduler_address, runner=run_fake, progress=False
         )
         assert store.done_keys() == {t.key for t in tasks}
     assert (e.finished, e.errors) == (len(tasks), 0)
@@ -149,22 +155,15 @@ def test_dask_cluster_on_loopback(tmp_path, control):
     assert not (control / "die-illumination.k=6-sift-vlad-1").exists()  # it did die, once
 
 
-def test_an_interrupted_dask_run_leaves_the_cluster_idle(tmp_path, control):
+def test_an_interrupted_dask_run_leaves_the_cluster_idle(tmp_path, control, dask_cluster):
     """Dask cannot stop a task that is running, but nothing else of the run may stay queued."""
-    distributed = pytest.importorskip("distributed")
+    from distributed import Client
+
     (control / "sleep-all").write_text("2")  # 8 episodes on 2 workers: about 8 s
-    cluster = distributed.LocalCluster(
-        n_workers=2,
-        threads_per_worker=1,
-        processes=True,
-        host="127.0.0.1",
-        dashboard_address=None,
-        local_directory=str(tmp_path / "dask"),
-    )
     env = {**os.environ, "PYTHONPATH": os.getcwd(), CONTROL_ENV: str(control)}
-    with cluster, distributed.Client(cluster.scheduler_address) as client:
+    with Client(dask_cluster.scheduler_address) as client:
         driver = subprocess.Popen(
-            [sys.executable, "-c", _DRIVER, str(tmp_path / "out"), cluster.scheduler_address],
+            [sys.executable, "-c", _DRIVER, str(tmp_path / "out"), dask_cluster.scheduler_address],
             env=env,
             stderr=subprocess.PIPE,
             text=True,
