@@ -26,6 +26,8 @@ def test_unknown_town_is_a_clear_error(capsys):
 def test_bad_fov_names_the_field(capsys, tmp_path):
     assert main(["render", "town10", "--fov", "0", "-o", str(tmp_path / "x.png")]) == 1
     assert "fov_deg" in capsys.readouterr().err
+    assert main(["render", "town10", "--deposits", "1.5", "-o", str(tmp_path / "x.png")]) == 1
+    assert "weather.deposits: must be in [0, 1]" in capsys.readouterr().err
 
 
 def test_render_with_and_without_antialiasing(tmp_path):
