@@ -27,14 +27,24 @@ EXIT_INTERRUPTED = 130  # the shell's code for a SIGINT
 
 
 def _towns(args: argparse.Namespace) -> int:
+    from vlocbench.sim.birdseye import save_town_map
+    from vlocbench.sim.generation import TownSet
     from vlocbench.sim.town import builtin_town_names, generate_town, load_town_spec
 
-    for name in builtin_town_names():
+    names = builtin_town_names()
+    if args.generate:
+        names = TownSet(args.generate, args.style, args.seed).names()
+        args.output.mkdir(parents=True, exist_ok=True)
+    for name in names:
         town = generate_town(load_town_spec(name))
         print(
             f"{name}: {town.spec.style}, {len(town.buildings)} buildings, route "
             f"{town.route.length_m:.0f} m with {town.route.num_turns} turns"
         )
+        if args.generate:
+            save_town_map(town, args.output / f"{name}.png")
+    if args.generate:
+        print(f"wrote {len(names)} maps to {args.output}")
     return 0
 
 
@@ -435,7 +445,21 @@ def _parents() -> dict[str, argparse.ArgumentParser]:
 
 
 def _add_town_verbs(sub: Any, shared: dict[str, argparse.ArgumentParser]) -> None:
-    p = sub.add_parser("towns", help="list the built-in towns and their routes")
+    p = sub.add_parser(
+        "towns",
+        help="list the built-in towns and their routes, or generate towns and write their maps",
+    )
+    p.add_argument(
+        "--generate",
+        type=_count,
+        metavar="COUNT",
+        help="draw COUNT towns (named gen-STYLE-SEED-INDEX, usable wherever a town is named)",
+    )
+    p.add_argument("--style", default="town", help="style of generated towns: town or city")
+    p.add_argument("--seed", type=int, default=0, help="seed of the generated set")
+    p.add_argument(
+        "-o", "--output", type=Path, default=Path("towns"), help="folder for generated towns' maps"
+    )
     p.set_defaults(func=_towns)
 
     p = sub.add_parser(

@@ -261,3 +261,17 @@ def test_a_ros_node_is_a_method_without_a_map():
                 }
             ]
         )
+
+
+def test_generated_sets_expand_into_towns_with_their_own_keys():
+    plan = _spec(
+        towns=["town10", {"generate": {"count": 3, "seed": 11, "style": "city"}}], recall=False
+    )
+    assert plan.spec.towns == ("town10", "gen-city-11-0", "gen-city-11-1", "gen-city-11-2")
+    keys = {t.town: t.key for t in plan.tasks() if t.kind == "failure" and t.repetition == 0}
+    assert len(set(keys.values())) == 4
+    assert len({plan.gallery_key(t) for t in plan.spec.towns}) == 4
+    with pytest.raises(ConfigError, match=r"towns\[0\].generate.count: must be in \[1, 64\]"):
+        _spec(towns=[{"generate": {"count": 100}}])
+    with pytest.raises(UnknownNameError, match="valid: gen-STYLE-SEED-INDEX, hidden-DIGEST"):
+        _spec(towns=["town99"])

@@ -68,3 +68,40 @@ def test_episodes_driven_on_another_capture_of_the_gallery_are_not_mixed_in(tiny
     plan = load_experiment(root / "tiny.yaml").with_output(out)
     with pytest.raises(StoreError, match=f"episode {key} .* captured again with other content"):
         run_experiment(plan, progress=False)
+
+
+def test_a_run_on_the_hidden_set_writes_neither_its_seed_nor_its_towns_specs(tmp_path, monkeypatch):
+    """Only rendered images, results and the seed's digest: no file of the store, the cache or
+    the report holds the seed, a town's own seed or any field of its spec."""
+    from vlocbench.bench.report import write_report
+    from vlocbench.sim.generation import HIDDEN_SEED_ENV, seed_digest
+    from vlocbench.sim.town import load_town_spec
+
+    seed = 2**52 + 977
+    monkeypatch.setenv(HIDDEN_SEED_ENV, str(seed))
+    plan = load_experiment(
+        {
+            "name": "hidden",
+            "towns": [{"hidden": {"count": 1, "style": "city"}}],
+            "route_length_m": 50,
+            "methods": [{"name": "oracle", "kind": "oracle"}],
+            "repetitions": 1,
+            "baseline_repetitions": 1,
+            "gallery": {"camera": {"intrinsics": {"width": 160, "height": 120}}},
+            "output": str(tmp_path / "out"),
+            "cache": str(tmp_path / "cache"),
+        }
+    )
+    [town] = plan.spec.towns
+    assert town == f"hidden-{seed_digest(seed)}-city-0"
+    summary = run_experiment(plan, progress=False)
+    assert (summary.finished, summary.errors) == (3, 0)
+    write_report(tmp_path / "out", examples=False)
+    spec = load_town_spec(town)
+    secrets = [str(seed), str(spec.seed), "block_widths_m", "beach_side", "tower_floors"]
+    files = [p for p in tmp_path.rglob("*") if p.is_file()]
+    assert any(p.suffix == ".html" for p in files)
+    for path in files:
+        content = path.read_bytes()
+        for secret in secrets:
+            assert secret.encode() not in content, (path, secret)

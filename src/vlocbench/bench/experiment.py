@@ -34,7 +34,8 @@ from vlocbench.bench.towns import route_named
 from vlocbench.config import config_hash, from_dict, load_yaml, require, to_dict
 from vlocbench.errors import ConfigError, UnknownNameError
 from vlocbench.loc.mapping import MappingConfig, map_name
-from vlocbench.sim import Camera, Conditions, builtin_town_names, gallery_camera
+from vlocbench.sim import Camera, Conditions, gallery_camera
+from vlocbench.sim.generation import is_hidden_name, town_set_names
 from vlocbench.sim.scene import SCENE_VERSION
 from vlocbench.sim.town import TownSpec, load_town_spec
 
@@ -152,9 +153,29 @@ class EpisodeTask:
 
 
 def _town_spec(name: str) -> TownSpec:
-    if Path(name).suffix not in (".yaml", ".yml") and name not in builtin_town_names():
-        raise UnknownNameError("town", name, builtin_town_names())
     return load_town_spec(name)
+
+
+def _town_key(name: str) -> Any:
+    """What of a town goes into its episodes' keys: its spec, or only the spec's hash for a hidden
+    town (a key is stored, and a hidden town's spec must not be readable from a store)."""
+    spec = _town_spec(name)
+    return {"hidden": config_hash(spec, 16)} if is_hidden_name(name) else to_dict(spec)
+
+
+def _towns(items: Any) -> list[str]:
+    """The experiment's town names: names and spec files as given, generated sets expanded."""
+    if not isinstance(items, list):
+        raise ConfigError("towns", "expected a list of town names, spec files or generated sets")
+    names: list[str] = []
+    for k, item in enumerate(items):
+        if isinstance(item, dict):
+            names += town_set_names(item, f"towns[{k}]")
+        elif isinstance(item, str):
+            names.append(item)
+        else:
+            raise ConfigError(f"towns[{k}]", "expected a town name, a spec file or a mapping")
+    return names
 
 
 def _method(item: Any, index: int) -> MethodSpec:
@@ -178,8 +199,8 @@ def load_experiment(source: str | Path | Mapping[str, Any]) -> ExperimentPlan:
     if not isinstance(sweep, dict):
         raise ConfigError("sweep", "expected a mapping of keys to values or lists of values")
     towns = data.get("towns")
-    if isinstance(towns, str):
-        data["towns"] = [towns]
+    if towns is not None:
+        data["towns"] = _towns([towns] if isinstance(towns, str) else towns)
     if "name" not in data and isinstance(source, str | Path):
         data["name"] = Path(source).stem
     data["methods"] = [_method(m, i) for i, m in enumerate(methods)]
@@ -248,9 +269,7 @@ class ExperimentPlan:
         """What determines a town's gallery: the town, the route, the drive and the scene
         version."""
         s = self.spec
-        return config_hash(
-            (to_dict(_town_spec(town)), s.route_length_m, s.gallery, SCENE_VERSION), 10
-        )
+        return config_hash((_town_key(town), s.route_length_m, s.gallery, SCENE_VERSION), 10)
 
     def gallery_folder(self, town: str) -> str:
         """The folder of a town's gallery in the cache: ``TOWN-GALLERYKEY``. Its maps lie under
@@ -274,7 +293,7 @@ class ExperimentPlan:
         """Every (town, setup, job) of the plan, so that a baseline episode comes once for each
         setup it serves: how the summary finds each setup's episodes in a store."""
         for town in self.spec.towns:
-            town_dict = to_dict(_town_spec(town))
+            town_dict = _town_key(town)
             for setup in self.setups:
                 for kind, method, rep in self._jobs():
                     yield self._task(town, town_dict, setup, kind, method, rep)
@@ -295,7 +314,7 @@ class ExperimentPlan:
     def _task(
         self,
         town: str,
-        town_dict: dict[str, Any],
+        town_dict: Any,
         setup: Setup,
         kind: EpisodeKind,
         method: MethodSpec | None,

@@ -153,13 +153,18 @@ def builtin_town_names() -> list[str]:
 
 
 def load_town_spec(name_or_path: str | Path) -> TownSpec:
-    """A built-in town by name (``town01``, ``town10``) or a user's town spec YAML file."""
+    """A built-in town by name (``town01``, ``town10``), a generated town by its name
+    (:mod:`vlocbench.sim.generation`) or a user's town spec YAML file."""
+    from vlocbench.sim import generation  # it builds on this module
+
     path = Path(name_or_path)
     if path.suffix in (".yaml", ".yml"):
         return TownSpec.from_yaml(path)
     name = str(name_or_path)
+    if generation.is_generated_name(name):
+        return generation.generated_spec(name)
     if name not in builtin_town_names():
-        raise UnknownNameError("town", name, builtin_town_names())
+        raise UnknownNameError("town", name, [*builtin_town_names(), *generation.NAME_PATTERNS])
     with resources.as_file(resources.files("vlocbench.sim") / "towns" / f"{name}.yaml") as p:
         return TownSpec.from_yaml(p)
 
