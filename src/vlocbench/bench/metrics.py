@@ -289,6 +289,7 @@ class FailureRate:
     low: float
     high: float
     repetitions: int
+    per_repetition: tuple[float, ...] = ()  # each repetition's r_i / L_km
 
 
 def failure_rate(
@@ -302,7 +303,7 @@ def failure_rate(
     rng = np.random.default_rng(seed)
     means = x[rng.integers(0, len(x), (resamples, len(x)))].mean(axis=1)
     low, high = np.percentile(means, [2.5, 97.5])
-    return FailureRate(float(x.mean()), float(low), float(high), len(x))
+    return FailureRate(float(x.mean()), float(low), float(high), len(x), tuple(map(float, x)))
 
 
 def failure_rate_by_cause(

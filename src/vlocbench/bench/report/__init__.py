@@ -9,6 +9,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+from vlocbench.bench.across import across_towns, rank_agreement
 from vlocbench.bench.experiment import ExperimentPlan, plan_from_stored
 from vlocbench.bench.metrics import METRICS
 from vlocbench.bench.report.comparison import paper_comparison_tables
@@ -22,6 +23,7 @@ from vlocbench.bench.report.figures import (
 from vlocbench.bench.report.page import write_page
 from vlocbench.bench.report.tables import (
     Table,
+    across_towns_table,
     cause_table,
     declared_metrics_table,
     drift_table,
@@ -29,7 +31,9 @@ from vlocbench.bench.report.tables import (
     fragmentation_table,
     latex,
     markdown,
+    per_town_table,
     place_recall_table,
+    ranking_table,
     recall_table,
 )
 from vlocbench.bench.store import StoreError, read_episodes, read_latest_run
@@ -118,7 +122,33 @@ def report_tables(summary: Summary) -> list[tuple[str, Table]]:
                 fragmentation_table(summary, town),
             )
         )
-    return out + paper_comparison_tables(summary)
+    return out + towns_tables(summary) + paper_comparison_tables(summary)
+
+
+def towns_tables(summary: Summary) -> list[tuple[str, Table]]:
+    """Where a run has several towns: them side by side, each method across them, and whether
+    they rank the methods alike."""
+    if len(summary.towns) < 2:
+        return []
+    rows = across_towns(summary)
+    n = len(summary.towns)
+    return [
+        (
+            "every town: failure rate F (failures/km, mean over repetitions) and T1 recall "
+            "(0.25 m, 2°; ground-truth drive)",
+            per_town_table(summary),
+        ),
+        (
+            f"across the {n} towns: F and T1 recall, mean over towns, with bootstrap 95 % "
+            "intervals drawing towns and drawing repetitions within each town",
+            across_towns_table(summary, rows),
+        ),
+        (
+            f"do the {n} towns rank the methods alike? Kendall's tau-b of each town's ranking "
+            "by F against the ranking across towns (1: the same order; NaN: a town ties them all)",
+            ranking_table(summary, rank_agreement(summary, rows)),
+        ),
+    ]
 
 
 def _write_tables(out: Path, tables: list[tuple[str, Table]]) -> tuple[Path, Path]:

@@ -5,6 +5,7 @@ failures by cause and place, and the odometry's drift."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Literal
 
 import matplotlib
@@ -12,6 +13,7 @@ import matplotlib
 matplotlib.use("Agg")
 import numpy as np
 
+from vlocbench.bench.across import AcrossTowns, RankAgreement
 from vlocbench.bench.metrics import METRICS, PLACE_RADII_M
 from vlocbench.bench.summary import BASELINE, Cell, Summary
 
@@ -205,6 +207,65 @@ def declared_metrics_table(summary: Summary, town: str) -> Table:
             values = [fmt(c.extra.get(name, float("nan")), m.digits) for name, m in METRICS.items()]
             label = "all" if method == BASELINE else setup_header(summary, s.label)
             rows.append([method_label(method), label, *values])
+    return header, rows
+
+
+def per_town_table(summary: Summary) -> Table:
+    """F (failures/km, mean over repetitions) and T1 recall (%) of each method in each town, a
+    row per town and a column per (method, setup): the towns side by side."""
+    pairs = [(m, s) for s in summary.setups for m in summary.methods]
+    header = ["town", *(f"{method_label(m)}, {setup_header(summary, s.label)}" for m, s in pairs)]
+    rows = []
+    for town in summary.towns:
+        row = [summary.town_names[town]]
+        for m, s in pairs:
+            c = summary.cell(town, m, s.label)
+            text = fmt(c.failure.mean) if c is not None and c.failure is not None else "–"
+            if c is not None and c.recall:
+                text += f" ({fmt(100 * c.recall[0])} %)"
+            row.append(text)
+        rows.append(row)
+    return header, rows
+
+
+def across_towns_table(summary: Summary, rows: Sequence[AcrossTowns]) -> Table:
+    """Each method and setup over the towns: mean F with its intervals over towns and over
+    repetitions, and mean T1 recall with its interval over towns."""
+    header = ["method", "setup", "F", "over towns", "over repetitions", "T1 (%)", "over towns"]
+    out = []
+    for r in rows:
+        (tl, th), (rl, rh), (ql, qh) = r.failure_towns, r.failure_repetitions, r.recall_towns
+        out.append(
+            [
+                method_label(r.method),
+                setup_header(summary, r.setup),
+                fmt(r.failure_mean),
+                f"[{fmt(tl)}, {fmt(th)}]",
+                f"[{fmt(rl)}, {fmt(rh)}]",
+                fmt(100 * r.recall_t1),
+                f"[{fmt(100 * ql)}, {fmt(100 * qh)}]" if np.isfinite(r.recall_t1) else "–",
+            ]
+        )
+    return header, out
+
+
+def ranking_table(summary: Summary, agreements: Sequence[RankAgreement]) -> Table:
+    """Per setup: the methods ranked by their mean F across towns, Kendall's tau-b of each town's
+    ranking against it (lowest and mean) and whether every town ranks them alike."""
+    header = ["setup", "ranking across towns (fewest failures first)", "tau-b min / mean", "alike"]
+    rows = []
+    for a in agreements:
+        taus = [t for t in a.tau_by_town.values() if np.isfinite(t)]
+        rows.append(
+            [
+                setup_header(summary, a.setup),
+                " < ".join(method_label(m) for m in a.order),
+                f"{fmt(a.tau_min, 2)} / {fmt(float(np.mean(taus)) if taus else np.nan, 2)}",
+                "yes"
+                if a.same_everywhere
+                else "no: " + ", ".join(t for t, v in a.tau_by_town.items() if v != 1.0),
+            ]
+        )
     return header, rows
 
 
