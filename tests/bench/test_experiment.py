@@ -146,7 +146,10 @@ def test_episode_settings_sweep_as_setups():
 
 
 def test_bad_experiments_are_clear_errors(tmp_path):
-    with pytest.raises(UnknownNameError, match="valid: town01, town10"):
+    with pytest.raises(
+        UnknownNameError,
+        match="valid: gen-STYLE-SEED-INDEX, hidden-DIGEST-STYLE-INDEX, town01, town10",
+    ):
         _spec(towns=["town99"])
     with pytest.raises(UnknownNameError, match=r"valid: aliked-lightglue, .*sift-vlad"):
         _spec(methods=["surf"])

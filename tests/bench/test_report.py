@@ -21,9 +21,12 @@ def test_report_of_a_run(tiny):
         "failure_sites_small.png",
         "failure_vs_recall.png",
         "computation_time.png",
+        "confidence_small.png",
     }
+    assert "can the answers' confidence be trusted" in md and "| sift-vlad | k=0 | inliers |" in md
+    assert "small: verdict, over illumination.k" in md
     page = files.html.read_text()
-    assert page.count("data:image/png;base64,") == 4
+    assert page.count("data:image/png;base64,") == 5
     assert page.count("data:image/jpeg;base64,") == 4  # query and gallery view per setup
     assert 'src="http' not in page  # self-contained
 

@@ -141,8 +141,11 @@ class _Columns:
     def __init__(self) -> None:
         self.rows: list[list[float]] = []
 
-    def add(self, t: float, s: VehicleState, ekf: tuple[float, float, float]) -> None:
-        self.rows.append([t, s.x_m, s.y_m, s.yaw_rad, *ekf, s.speed_mps, np.nan, np.nan])
+    def add(
+        self, t: float, s: VehicleState, ekf: tuple[float, float, float], ekf_cov: Array
+    ) -> None:
+        upper = ekf_cov[np.triu_indices(3)]
+        self.rows.append([t, s.x_m, s.y_m, s.yaw_rad, *ekf, *upper, s.speed_mps, np.nan, np.nan])
 
     def odometry(self, reading: OdometryReading) -> None:
         if self.rows:
@@ -242,6 +245,14 @@ class Episode:
         x, y, yaw = self.ekf.pose
         d = self.rear_offset_m
         return x + d * float(np.cos(yaw)), y + d * float(np.sin(yaw)), yaw
+
+    def _ekf_covariance(self) -> Array:
+        """(3, 3) covariance of :meth:`_ekf_pose` (x, y, yaw): the filter's rear-axle pose
+        moved forward by the rear offset, whose position then carries some of the yaw's
+        uncertainty."""
+        yaw, d = self.ekf.pose[2], self.rear_offset_m
+        jac = np.array([[1, 0, -d * np.sin(yaw)], [0, 1, d * np.cos(yaw)], [0, 0, 1]])
+        return jac @ self.ekf.P[:3, :3] @ jac.T
 
     # -- pieces of a step --------------------------------------------------------------------
     def _restart_at(self, index: int, t: float) -> None:
@@ -353,7 +364,7 @@ class Episode:
         self._deliver(t)
         ekf_pose = self._ekf_pose()
         if c.record_trajectory:
-            self.columns.add(t, state, ekf_pose)
+            self.columns.add(t, state, ekf_pose, self._ekf_covariance())
         if c.mode == "navigate":
             x, y, yaw = ekf_pose
             speed = self.ekf.speed_mps if c.speed_source == "ekf" else state.speed_mps
@@ -387,7 +398,7 @@ class Episode:
         """The episode's result once it ended at ``t`` (the goal, or out of time)."""
         c = self.config
         if c.record_trajectory:
-            self.columns.add(t, self.sim.state, self._ekf_pose())
+            self.columns.add(t, self.sim.state, self._ekf_pose(), self._ekf_covariance())
         for p in self.in_flight:
             self.records.append(_record(p, None))
         self.segments.append(Segment(self.segment_start_s, self.progress.farthest_s_m))

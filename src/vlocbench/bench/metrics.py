@@ -17,7 +17,14 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from vlocbench.bench.records import EPISODE_KINDS, EpisodeKind, EpisodeResult, per_km
+from vlocbench.bench.consistency import answer_nees, consistency, ekf_nees
+from vlocbench.bench.records import (
+    EPISODE_KINDS,
+    EpisodeKind,
+    EpisodeResult,
+    localization_columns,
+    per_km,
+)
 from vlocbench.config import require_one_of
 from vlocbench.errors import ConfigError
 from vlocbench.geometry import wrap_angle
@@ -339,3 +346,40 @@ def fragmentation(sites_s_m: Sequence[float], bin_m: float = HOTSPOT_BIN_M) -> F
     return Fragmentation(
         len(s), len(bins), float(counts[worst] / len(s)), float(bins[worst] * bin_m)
     )
+
+
+declare_metric(
+    Metric(
+        name="ekf_nees_mean",
+        episode=lambda r: consistency(ekf_nees(vars(r.trajectory))).mean_nees,
+        header="EKF NEES, mean (3: consistent)",
+        kinds=("recall", "failure", "baseline"),
+    )
+)
+declare_metric(
+    Metric(
+        name="ekf_inside_95_share",
+        episode=lambda r: consistency(ekf_nees(vars(r.trajectory))).inside_95,
+        header="truth inside the EKF's 95 % ellipse (share of steps)",
+        kinds=("recall", "failure", "baseline"),
+        digits=2,
+    )
+)
+declare_metric(
+    Metric(
+        name="ekf_overconfident_share",
+        episode=lambda r: consistency(ekf_nees(vars(r.trajectory))).above,
+        header="EKF overconfident (share of steps above the chi-square band; 0.025)",
+        kinds=("recall", "failure", "baseline"),
+        digits=2,
+    )
+)
+declare_metric(
+    Metric(
+        name="answer_inside_95_share",
+        episode=lambda r: consistency(answer_nees(localization_columns(r.localizations))).inside_95,
+        header="truth inside the answer's own 95 % ellipse (share; answers with a covariance)",
+        kinds=("recall",),
+        digits=2,
+    )
+)

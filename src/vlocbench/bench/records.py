@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Literal, get_args
+from collections.abc import Sequence
+from dataclasses import dataclass, fields
+from typing import Any, Literal, get_args
 
 import numpy as np
 
@@ -68,6 +69,12 @@ class LocalizationRecord:
     inliers: int = 0
 
 
+def localization_columns(locs: Sequence[LocalizationRecord]) -> dict[str, list[Any]]:
+    """Records as columns, by field name (the stored table's layout)."""
+    names = [f.name for f in fields(LocalizationRecord)]
+    return {n: [getattr(x, n) for x in locs] for n in names} if locs else {}
+
+
 @dataclass(frozen=True, kw_only=True)
 class Reinitialization:
     """A navigation failure and where the car was put back.
@@ -99,8 +106,9 @@ class Segment:
 
 @dataclass(frozen=True, kw_only=True)
 class Trajectory:
-    """Per-step columns, all (N,): time, true pose, EKF pose, true speed, and the wheel odometry
-    the EKF got for the step that starts there (NaN in the last row)."""
+    """Per-step columns, all (N,): time, true pose, EKF pose and its covariance (the upper
+    triangle of the (3, 3) over x, y, yaw), true speed, and the wheel odometry the EKF got for the
+    step that starts there (NaN in the last row)."""
 
     time_s: Array
     true_x_m: Array
@@ -109,6 +117,12 @@ class Trajectory:
     ekf_x_m: Array
     ekf_y_m: Array
     ekf_yaw_rad: Array
+    ekf_cov_xx_m2: Array
+    ekf_cov_xy_m2: Array
+    ekf_cov_xyaw_mrad: Array
+    ekf_cov_yy_m2: Array
+    ekf_cov_yyaw_mrad: Array
+    ekf_cov_yawyaw_rad2: Array
     speed_mps: Array
     odometry_speed_mps: Array
     odometry_yaw_rate_radps: Array

@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 
 from vlocbench.bench.metrics import EpisodeMetrics
-from vlocbench.bench.records import EpisodeResult
+from vlocbench.bench.records import EpisodeResult, localization_columns
 from vlocbench.config import config_hash
 from vlocbench.errors import MachineError, VlocbenchError
 
@@ -197,10 +197,7 @@ def read_episodes(output_dir: str | Path) -> list[EpisodeRow]:
 def _columns(result: EpisodeResult) -> tuple[dict[str, Any], dict[str, Any]]:
     tr = result.trajectory
     trajectory = {f.name: getattr(tr, f.name) for f in dataclasses.fields(tr)}
-    locs = result.localizations
-    names = [f.name for f in dataclasses.fields(locs[0])] if locs else []
-    localizations = {n: [getattr(x, n) for x in locs] for n in names}
-    return trajectory, localizations
+    return trajectory, localization_columns(result.localizations)
 
 
 def _make_strict(db: sqlite3.Connection) -> None:

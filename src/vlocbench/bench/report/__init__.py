@@ -10,11 +10,13 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from vlocbench.bench.across import across_towns, rank_agreement
+from vlocbench.bench.consistency import confidence_curve
 from vlocbench.bench.experiment import ExperimentPlan, plan_from_stored
 from vlocbench.bench.metrics import METRICS
 from vlocbench.bench.report.comparison import paper_comparison_tables
 from vlocbench.bench.report.figures import (
     computation_time_figure,
+    confidence_figure,
     crash_sites_figure,
     failure_figure,
     failure_vs_recall_figure,
@@ -22,9 +24,11 @@ from vlocbench.bench.report.figures import (
 )
 from vlocbench.bench.report.page import write_page
 from vlocbench.bench.report.tables import (
+    Curves,
     Table,
     across_towns_table,
     cause_table,
+    confidence_table,
     declared_metrics_table,
     drift_table,
     failure_table,
@@ -35,8 +39,15 @@ from vlocbench.bench.report.tables import (
     place_recall_table,
     ranking_table,
     recall_table,
+    verdict_table,
 )
-from vlocbench.bench.store import StoreError, read_episodes, read_latest_run
+from vlocbench.bench.store import (
+    EpisodeRow,
+    StoreError,
+    read_episode_table,
+    read_episodes,
+    read_latest_run,
+)
 from vlocbench.bench.summary import Summary, summarize
 
 REPORT_DIR = "report"
@@ -52,10 +63,34 @@ class ReportFiles:
     summary: Summary
 
 
-def report_tables(summary: Summary) -> list[tuple[str, Table]]:
+def confidence_curves(summary: Summary, rows: Sequence[EpisodeRow], output_dir: Path) -> Curves:
+    """Each (town, method, setup)'s confidence curve, from its ground-truth drive's stored
+    localizations (a drive without its table is left out)."""
+    recall = {r.key for r in rows if r.kind == "recall" and r.status == "ok"}
+    curves = {}
+    for cell_key, cell in summary.cells.items():
+        for key in sorted(cell.keys & recall):
+            try:
+                locs = read_episode_table(output_dir, key, "localizations")
+            except StoreError:
+                continue
+            curves[cell_key] = confidence_curve(locs)
+    return curves
+
+
+def report_tables(summary: Summary, curves: Curves | None = None) -> list[tuple[str, Table]]:
     out = []
     for town in summary.towns:
         name = summary.town_names[town]
+        if summary.spec.methods and summary.spec.baseline and len(summary.axis) == 1:
+            out.append(
+                (
+                    f"{name}: verdict, over {summary.axis[0]} from easy to hard: how far each "
+                    "method keeps F at most 1 /km, and from where it crashes more often than "
+                    "odometry alone",
+                    verdict_table(summary, town),
+                )
+            )
         out.append(
             (
                 f"{name}: failure rate F (failures/km, mean [bootstrap 95 % CI] over "
@@ -97,6 +132,15 @@ def report_tables(summary: Summary) -> list[tuple[str, Table]]:
                     f"{name}: recall (%) of the fused (EKF) pose at every step, same drive "
                     "(lock losses per km: the EKF reset at the truth)",
                     recall_table(summary, town, "fused"),
+                )
+            )
+        if curves:
+            out.append(
+                (
+                    f"{name}: can the answers' confidence be trusted? Answers of the ground-truth "
+                    "drive ranked by confidence: area under precision (within 5 m, 10°) against "
+                    "the share of queries answered, and the threshold that keeps precision at 95 %",
+                    confidence_table(summary, town, curves),
                 )
             )
         if summary.spec.baseline:
@@ -164,12 +208,14 @@ def _write_tables(out: Path, tables: list[tuple[str, Table]]) -> tuple[Path, Pat
     return md, tex
 
 
-def _write_figures(summary: Summary, out: Path) -> list[Path]:
+def _write_figures(summary: Summary, out: Path, curves: Curves) -> list[Path]:
     from vlocbench.bench.towns import town_named
 
     figures: list[Path] = []
     for town in summary.towns:
         name = summary.town_names[town]
+        if any(key[0] == town for key in curves):
+            figures.append(confidence_figure(summary, town, curves, out / f"confidence_{name}.png"))
         figures.append(failure_figure(summary, town, out / f"failure_rate_{name}.png"))
         figures.append(
             crash_sites_figure(summary, town, town_named(town), out / f"failure_sites_{name}.png")
@@ -201,9 +247,10 @@ def write_report(
     summary = summarize(plan, rows)
     out = Path(output_dir) / REPORT_DIR
     out.mkdir(parents=True, exist_ok=True)
-    tables = report_tables(summary)
+    curves = confidence_curves(summary, rows, Path(output_dir))
+    tables = report_tables(summary, curves)
     md, tex = _write_tables(out, tables)
-    figures = _write_figures(summary, out)
+    figures = _write_figures(summary, out, curves)
     page = write_page(summary, rows, tables, figures, examples, out)
     return ReportFiles(page, md, tex, tuple(figures), summary)
 

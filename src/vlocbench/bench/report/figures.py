@@ -4,6 +4,7 @@ Fig. 6), computation time per method."""
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -13,6 +14,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
+from vlocbench.bench.consistency import ConfidenceCurve
 from vlocbench.bench.paper import paper_results
 from vlocbench.bench.report.comparison import level_text, paper_axis
 from vlocbench.bench.report.tables import setup_header
@@ -196,6 +198,35 @@ def crash_sites_figure(summary: Summary, town: str, town_obj: Any, path: Path) -
             ax.scatter(xs, ys, marker="x", s=36, c=color, zorder=10, label=f"{method} ({len(xy)})")
     ax.legend(loc="upper right", fontsize=7)
     ax.set_title(f"{summary.town_names[town]}: failure sites, all setups and repetitions")
+    return _save(fig, path)
+
+
+def confidence_figure(
+    summary: Summary, town: str, curves: Mapping[tuple[str, str, str], ConfidenceCurve], path: Path
+) -> Path:
+    """Precision against the share of queries answered, answers most confident first: a line per
+    method (colour) and setup (lighter as the level gets harder)."""
+    fig, ax = plt.subplots(figsize=(7, 4.2))
+    methods = [m for m in summary.methods if m != BASELINE]
+    n = len(summary.setups)
+    for method, color in zip(methods, COLORS * 4):
+        for k, s in enumerate(summary.setups):
+            curve = curves.get((town, method, s.label))
+            if curve is None or not len(curve.share):
+                continue
+            label = f"{method}, {setup_header(summary, s.label)}"
+            alpha = 1.0 - 0.75 * k / max(n - 1, 1)
+            ax.step(
+                curve.share, curve.precision, where="post", color=color, alpha=alpha, label=label
+            )
+    ax.axhline(0.95, color="0.5", lw=0.8, ls=":")
+    ax.set_xlim(0, 1)
+    ax.set_ylim(0, 1.02)
+    ax.set_xlabel("share of queries answered (most confident first)")
+    ax.set_ylabel("precision: share within (5 m, 10°)")
+    ax.set_title(f"{summary.town_names[town]}: can the answers' confidence be trusted?")
+    if ax.lines[1:]:
+        ax.legend(fontsize=7, loc="lower left", ncol=2)
     return _save(fig, path)
 
 

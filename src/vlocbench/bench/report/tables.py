@@ -5,7 +5,7 @@ failures by cause and place, and the odometry's drift."""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Literal
 
 import matplotlib
@@ -14,6 +14,7 @@ matplotlib.use("Agg")
 import numpy as np
 
 from vlocbench.bench.across import AcrossTowns, RankAgreement
+from vlocbench.bench.consistency import ConfidenceCurve
 from vlocbench.bench.metrics import METRICS, PLACE_RADII_M
 from vlocbench.bench.summary import BASELINE, Cell, Summary
 
@@ -264,6 +265,82 @@ def ranking_table(summary: Summary, agreements: Sequence[RankAgreement]) -> Tabl
                 "yes"
                 if a.same_everywhere
                 else "no: " + ", ".join(t for t, v in a.tau_by_town.items() if v != 1.0),
+            ]
+        )
+    return header, rows
+
+
+Curves = Mapping[tuple[str, str, str], ConfidenceCurve]  # (town, method, setup label)
+
+
+def confidence_table(summary: Summary, town: str, curves: Curves) -> Table:
+    """Per method and setup, its answers ranked by confidence (ground-truth drive): the area
+    under precision against the share answered, and the confidence threshold that keeps precision
+    at 95 % with the share it still answers."""
+    header = [
+        "method",
+        "setup",
+        "ranked by",
+        "AUC",
+        "precision, all answers",
+        "95 % precision from",
+    ]
+    rows = []
+    for method in (m for m in summary.methods if m != BASELINE):
+        for s in summary.setups:
+            curve = curves.get((town, method, s.label))
+            if curve is None or curve.queries == 0:
+                continue
+            overall = curve.precision[-1] if len(curve.precision) else np.nan
+            keep = (
+                f"{curve.threshold:g} {curve.by} ({fmt(100 * curve.share_at_threshold)} % answered)"
+                if np.isfinite(curve.threshold)
+                else "never"
+            )
+            rows.append(
+                [
+                    method,
+                    setup_header(summary, s.label),
+                    curve.by,
+                    fmt(curve.auc, 2),
+                    fmt(100 * overall),
+                    keep if curve.by == "inliers" else keep.replace(curve.by, "1/m²"),
+                ]
+            )
+    return header, rows
+
+
+def verdict_table(summary: Summary, town: str) -> Table:
+    """A line per method over the one swept factor (its levels from easy to hard, as the
+    experiment lists them): the hardest level up to which F stays at most 1 /km, and the first
+    where it is above the odometry line."""
+    header = ["method", "F <= 1 /km up to", "worse than odometry only from"]
+    if len(summary.axis) != 1:
+        return header, []
+    labels = [s.label for s in summary.setups]
+    odometry = [summary.cell(town, BASELINE, label) for label in labels]
+    rows = []
+    for method in (m for m in summary.methods if m != BASELINE):
+        f = [summary.cell(town, method, label) for label in labels]
+        means = [c.failure.mean if c and c.failure else np.nan for c in f]
+        if not np.isfinite(means).all():
+            continue
+        ok = 0
+        while ok < len(means) and means[ok] <= 1.0:
+            ok += 1
+        cross = next(
+            (
+                k
+                for k, (m, o) in enumerate(zip(means, odometry))
+                if o is not None and o.failure is not None and m > o.failure.mean
+            ),
+            None,
+        )
+        rows.append(
+            [
+                method,
+                setup_header(summary, labels[ok - 1]) if ok else "not even the first level",
+                setup_header(summary, labels[cross]) if cross is not None else "never",
             ]
         )
     return header, rows
