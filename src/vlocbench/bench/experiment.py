@@ -40,7 +40,10 @@ from vlocbench.sim.scene import SCENE_VERSION
 from vlocbench.sim.town import TownSpec, load_town_spec
 
 _CONDITION_KEYS = tuple(f.name for f in dataclasses.fields(Conditions))
-SWEEP_ROOTS = (*_CONDITION_KEYS, "camera", "cameras", "episode")
+SWEEP_ROOTS = (*_CONDITION_KEYS, "camera", "cameras", "episode", "methods")
+# what of a method may be swept (methods.NAME.FIELD...): its localizer's settings and a kind's
+# arguments; anything else would make another map, so it is another method
+METHOD_SWEEP_FIELDS = ("localizer", "args")
 # set per episode by its kind and repetition, so not sweepable
 _PER_TASK_EPISODE_KEYS = ("episode.mode", "episode.seed")
 
@@ -71,6 +74,8 @@ class Setup:
     conditions: Conditions
     cameras: tuple[Camera, ...]
     episode: EpisodeConfig
+    # the experiment's methods with this setup's ``methods.NAME.*`` values; empty: its own
+    methods: tuple[MethodSpec, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -295,13 +300,14 @@ class ExperimentPlan:
         for town in self.spec.towns:
             town_dict = _town_key(town)
             for setup in self.setups:
-                for kind, method, rep in self._jobs():
+                for kind, method, rep in self._jobs(setup):
                     yield self._task(town, town_dict, setup, kind, method, rep)
 
-    def _jobs(self) -> list[tuple[EpisodeKind, MethodSpec | None, int]]:
+    def _jobs(self, setup: Setup) -> list[tuple[EpisodeKind, MethodSpec | None, int]]:
         s = self.spec
         jobs: list[tuple[EpisodeKind, MethodSpec | None, int]] = []
-        for method in s.methods:
+        names = {m.name for m in s.methods}  # a part of the plan (only()) keeps its methods
+        for method in (m for m in setup.methods or s.methods if m.name in names):
             if s.recall:
                 jobs.append(("recall", method, 0))
             if s.failure:
@@ -432,8 +438,47 @@ def _sweep_levels(spec: ExperimentSpec) -> list[tuple[str, list[Any]]]:
             raise UnknownNameError("sweep key", key, SWEEP_ROOTS)
         if key in _PER_TASK_EPISODE_KEYS or key == "episode":
             raise ConfigError(f"sweep.{key}", "is set per episode by its kind and repetition")
+        if root == "methods":
+            _check_method_key(spec, key)
         keys.append((key, _levels(key, value)))
     return keys
+
+
+def _check_method_key(spec: ExperimentSpec, key: str) -> None:
+    """``methods.NAME.FIELD...``: NAME one of the experiment's methods, FIELD one it may sweep."""
+    parts = key.split(".")
+    names = [m.name for m in spec.methods]
+    if len(parts) < 3:
+        raise ConfigError(
+            f"sweep.{key}", "expected methods.NAME.localizer... or methods.NAME.args..."
+        )
+    if parts[1] not in names:
+        raise UnknownNameError(f"sweep.{key}: method", parts[1], names)
+    require(
+        parts[2] in METHOD_SWEEP_FIELDS,
+        f"sweep.{key}",
+        f"a method's {parts[2]} cannot be swept (only {', '.join(METHOD_SWEEP_FIELDS)}: other "
+        "settings make another map; list it as another method)",
+    )
+
+
+def _methods(spec: ExperimentSpec, overrides: dict[str, Any] | None) -> tuple[MethodSpec, ...]:
+    """The experiment's methods with a setup's swept ``methods.NAME.*`` values (checked as the
+    method's own fields are); empty when none is swept."""
+    if not overrides:
+        return ()
+    out = []
+    for method in spec.methods:
+        if method.name not in overrides:
+            out.append(method)
+            continue
+        merged = to_dict(method)
+        _merge(merged, overrides[method.name])
+        try:
+            out.append(from_dict(MethodSpec, merged))
+        except ConfigError as exc:  # it names the method's own field: say that a sweep set it
+            raise ConfigError(f"sweep.methods.{method.name}", str(exc)) from None
+    return tuple(out)
 
 
 def _resolve_setups(spec: ExperimentSpec, sweep: list[tuple[str, list[Any]]]) -> tuple[Setup, ...]:
@@ -445,13 +490,19 @@ def _resolve_setups(spec: ExperimentSpec, sweep: list[tuple[str, list[Any]]]) ->
         for (key, _), value in zip(sweep, combo):
             _set(tree, key, copy.deepcopy(value))
         episode = _episode(spec.episode, tree.pop("episode", None))
+        methods = _methods(spec, tree.pop("methods", None))
         cameras = _cameras(spec.gallery.camera, tree.pop("cameras", None), tree.pop("camera", None))
         conditions = from_dict(Conditions, tree, "sweep")
         levels = tuple((k, v) for (k, _), v in zip(sweep, combo) if k in swept)
         label = ", ".join(_label(k, v) for k, v in levels) or "default"
         out.append(
             Setup(
-                label=label, levels=levels, conditions=conditions, cameras=cameras, episode=episode
+                label=label,
+                levels=levels,
+                conditions=conditions,
+                cameras=cameras,
+                episode=episode,
+                methods=methods,
             )
         )
     labels = [s.label for s in out]

@@ -21,6 +21,7 @@ from vlocbench.bench.report.figures import (
     failure_figure,
     failure_vs_recall_figure,
     paper_failure_figure,
+    requirements_figure,
 )
 from vlocbench.bench.report.page import write_page
 from vlocbench.bench.report.tables import (
@@ -39,7 +40,14 @@ from vlocbench.bench.report.tables import (
     place_recall_table,
     ranking_table,
     recall_table,
+    requirements_table,
     verdict_table,
+)
+from vlocbench.bench.requirements import (
+    MeasuredAccuracy,
+    measured_accuracy,
+    oracle_sweeps,
+    placed_methods,
 )
 from vlocbench.bench.store import (
     EpisodeRow,
@@ -63,11 +71,19 @@ class ReportFiles:
     summary: Summary
 
 
-def confidence_curves(summary: Summary, rows: Sequence[EpisodeRow], output_dir: Path) -> Curves:
-    """Each (town, method, setup)'s confidence curve, from its ground-truth drive's stored
-    localizations (a drive without its table is left out)."""
+@dataclass(frozen=True)
+class DriveFigures:
+    """What the report reads from each (town, method, setup)'s ground-truth drive's stored
+    localizations: its confidence curve and its measured accuracy."""
+
+    curves: Curves
+    accuracy: dict[tuple[str, str, str], MeasuredAccuracy]
+
+
+def drive_figures(summary: Summary, rows: Sequence[EpisodeRow], output_dir: Path) -> DriveFigures:
+    """From the stored tables (a drive without one is left out)."""
     recall = {r.key for r in rows if r.kind == "recall" and r.status == "ok"}
-    curves = {}
+    curves, accuracy = {}, {}
     for cell_key, cell in summary.cells.items():
         for key in sorted(cell.keys & recall):
             try:
@@ -75,13 +91,25 @@ def confidence_curves(summary: Summary, rows: Sequence[EpisodeRow], output_dir: 
             except StoreError:
                 continue
             curves[cell_key] = confidence_curve(locs)
-    return curves
+            accuracy[cell_key] = measured_accuracy(locs)
+    return DriveFigures(curves, accuracy)
 
 
-def report_tables(summary: Summary, curves: Curves | None = None) -> list[tuple[str, Table]]:
+def report_tables(summary: Summary, drives: DriveFigures | None = None) -> list[tuple[str, Table]]:
     out = []
+    curves = drives.curves if drives else {}
     for town in summary.towns:
         name = summary.town_names[town]
+        sweeps = oracle_sweeps(summary, town)
+        if sweeps and drives:
+            out.append(
+                (
+                    f"{name}: how accurate must localization be? Each method at the oracle sigma "
+                    "with its answers' median planar error (ground-truth drive), its F (failures/km, "
+                    "[bootstrap 95 % CI]) and the swept oracle's F at that sigma",
+                    requirements_table(sweeps, placed_methods(summary, town, drives.accuracy)),
+                )
+            )
         if summary.spec.methods and summary.spec.baseline and len(summary.axis) == 1:
             out.append(
                 (
@@ -208,14 +236,19 @@ def _write_tables(out: Path, tables: list[tuple[str, Table]]) -> tuple[Path, Pat
     return md, tex
 
 
-def _write_figures(summary: Summary, out: Path, curves: Curves) -> list[Path]:
+def _write_figures(summary: Summary, out: Path, drives: DriveFigures) -> list[Path]:
     from vlocbench.bench.towns import town_named
 
     figures: list[Path] = []
     for town in summary.towns:
         name = summary.town_names[town]
-        if any(key[0] == town for key in curves):
-            figures.append(confidence_figure(summary, town, curves, out / f"confidence_{name}.png"))
+        if any(key[0] == town for key in drives.curves):
+            path = out / f"confidence_{name}.png"
+            figures.append(confidence_figure(summary, town, drives.curves, path))
+        if sweeps := oracle_sweeps(summary, town):
+            placed = placed_methods(summary, town, drives.accuracy)
+            path = out / f"requirements_{name}.png"
+            figures.append(requirements_figure(summary, town, sweeps, placed, path))
         figures.append(failure_figure(summary, town, out / f"failure_rate_{name}.png"))
         figures.append(
             crash_sites_figure(summary, town, town_named(town), out / f"failure_sites_{name}.png")
@@ -247,10 +280,10 @@ def write_report(
     summary = summarize(plan, rows)
     out = Path(output_dir) / REPORT_DIR
     out.mkdir(parents=True, exist_ok=True)
-    curves = confidence_curves(summary, rows, Path(output_dir))
-    tables = report_tables(summary, curves)
+    drives = drive_figures(summary, rows, Path(output_dir))
+    tables = report_tables(summary, drives)
     md, tex = _write_tables(out, tables)
-    figures = _write_figures(summary, out, curves)
+    figures = _write_figures(summary, out, drives)
     page = write_page(summary, rows, tables, figures, examples, out)
     return ReportFiles(page, md, tex, tuple(figures), summary)
 

@@ -4,7 +4,7 @@ Fig. 6), computation time per method."""
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -15,9 +15,11 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from vlocbench.bench.consistency import ConfidenceCurve
+from vlocbench.bench.metrics import FailureRate
 from vlocbench.bench.paper import paper_results
 from vlocbench.bench.report.comparison import level_text, paper_axis
 from vlocbench.bench.report.tables import setup_header
+from vlocbench.bench.requirements import MeasuredAccuracy, OracleSweep
 from vlocbench.bench.summary import BASELINE, Summary
 
 # the paper's methods in muted tones, so that ours stand out in the same axes
@@ -227,6 +229,56 @@ def confidence_figure(
     ax.set_title(f"{summary.town_names[town]}: can the answers' confidence be trusted?")
     if ax.lines[1:]:
         ax.legend(fontsize=7, loc="lower left", ncol=2)
+    return _save(fig, path)
+
+
+def requirements_figure(
+    summary: Summary,
+    town: str,
+    sweeps: Sequence[OracleSweep],
+    placed: Sequence[tuple[str, MeasuredAccuracy, FailureRate]],
+    path: Path,
+) -> Path:
+    """F against the oracle's position sigma (its 95 % interval shaded), the odometry line, and
+    each real method at the sigma its answers measured, labelled with its answer rate and far
+    answers."""
+    fig, ax = plt.subplots(figsize=(7, 4.2))
+    for sweep, color in zip(sweeps, ("0.15", "0.45")):
+        mean = [f.mean for f in sweep.failure]
+        ax.plot(sweep.sigmas_m, mean, "o-", color=color, label=f"{sweep.method} (swept)")
+        low, high = [f.low for f in sweep.failure], [f.high for f in sweep.failure]
+        ax.fill_between(sweep.sigmas_m, low, high, color=color, alpha=0.15, lw=0)
+    odometry = next(
+        (
+            c.failure
+            for s in summary.setups
+            if (c := summary.cell(town, BASELINE, s.label)) and c.failure
+        ),
+        None,
+    )
+    if odometry is not None:
+        ax.axhline(odometry.mean, ls="--", color="0.4", lw=1, label="odometry only")
+    for (name, acc, f), color in zip(placed, COLORS * 4):
+        x = max(acc.equivalent_sigma_m, 0.01) if np.isfinite(acc.equivalent_sigma_m) else np.nan
+        ax.errorbar(
+            [x],
+            [f.mean],
+            yerr=[[f.mean - f.low], [f.high - f.mean]],
+            fmt="D",
+            color=color,
+            capsize=3,
+            label=f"{name}: {100 * acc.answer_rate:.0f} % answered, "
+            f"{100 * acc.far_share:.0f} % beyond 5 m",
+        )
+    ax.set_xscale("symlog", linthresh=0.25)
+    swept = sorted({x for sweep in sweeps for x in sweep.sigmas_m})
+    ax.set_xticks(swept, [f"{x:g}" for x in swept])
+    ax.set_xlim(left=0)
+    ax.set_ylim(bottom=0)
+    ax.set_xlabel("oracle position sigma (m); a method at the sigma with its answers' median error")
+    ax.set_ylabel("failure rate F (1/km)")
+    ax.set_title(f"{summary.town_names[town]}: how accurate must localization be?")
+    ax.legend(fontsize=7)
     return _save(fig, path)
 
 

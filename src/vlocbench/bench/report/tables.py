@@ -15,7 +15,8 @@ import numpy as np
 
 from vlocbench.bench.across import AcrossTowns, RankAgreement
 from vlocbench.bench.consistency import ConfidenceCurve
-from vlocbench.bench.metrics import METRICS, PLACE_RADII_M
+from vlocbench.bench.metrics import METRICS, PLACE_RADII_M, FailureRate
+from vlocbench.bench.requirements import MeasuredAccuracy, OracleSweep
 from vlocbench.bench.summary import BASELINE, Cell, Summary
 
 Table = tuple[list[str], list[list[str]]]  # header, rows
@@ -341,6 +342,28 @@ def verdict_table(summary: Summary, town: str) -> Table:
                 method,
                 setup_header(summary, labels[ok - 1]) if ok else "not even the first level",
                 setup_header(summary, labels[cross]) if cross is not None else "never",
+            ]
+        )
+    return header, rows
+
+
+def requirements_table(
+    sweeps: Sequence[OracleSweep], placed: Sequence[tuple[str, MeasuredAccuracy, FailureRate]]
+) -> Table:
+    """Each real method where the oracle sweep places it: the oracle sigma with its answers'
+    median error, its answer rate and far answers, its F and the oracle's F at that sigma."""
+    header = ["method", "as accurate as the oracle at (m)", "answered (%)", "beyond 5 m (%)", "F"]
+    header += [f"{s.method}'s F there" for s in sweeps]
+    rows = []
+    for name, acc, f in placed:
+        rows.append(
+            [
+                name,
+                fmt(acc.equivalent_sigma_m, 2),
+                fmt(100 * acc.answer_rate),
+                fmt(100 * acc.far_share),
+                f"{fmt(f.mean)} [{fmt(f.low)}, {fmt(f.high)}]",
+                *(fmt(s.at(acc.equivalent_sigma_m)) for s in sweeps),
             ]
         )
     return header, rows
