@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, fields
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -348,32 +349,30 @@ def fragmentation(sites_s_m: Sequence[float], bin_m: float = HOTSPOT_BIN_M) -> F
     )
 
 
-declare_metric(
-    Metric(
-        name="ekf_nees_mean",
-        episode=lambda r: consistency(ekf_nees(vars(r.trajectory))).mean_nees,
-        header="EKF NEES, mean (3: consistent)",
-        kinds=("recall", "failure", "baseline"),
+def _ekf_consistency(result: EpisodeResult, figure: str) -> float:
+    """One figure of :class:`~vlocbench.bench.consistency.Consistency` of the episode's EKF."""
+    return float(getattr(consistency(ekf_nees(vars(result.trajectory))), figure))
+
+
+for _name, _figure, _header, _digits in (
+    ("ekf_nees_mean", "mean_nees", "EKF NEES, mean (3: consistent)", 1),
+    ("ekf_inside_95_share", "inside_95", "truth inside the EKF's 95 % ellipse (share of steps)", 2),
+    (
+        "ekf_overconfident_share",
+        "above",
+        "EKF overconfident (share of steps above the chi-square band; 0.025)",
+        2,
+    ),
+):
+    declare_metric(
+        Metric(
+            name=_name,
+            episode=partial(_ekf_consistency, figure=_figure),
+            header=_header,
+            kinds=("recall", "failure", "baseline"),
+            digits=_digits,
+        )
     )
-)
-declare_metric(
-    Metric(
-        name="ekf_inside_95_share",
-        episode=lambda r: consistency(ekf_nees(vars(r.trajectory))).inside_95,
-        header="truth inside the EKF's 95 % ellipse (share of steps)",
-        kinds=("recall", "failure", "baseline"),
-        digits=2,
-    )
-)
-declare_metric(
-    Metric(
-        name="ekf_overconfident_share",
-        episode=lambda r: consistency(ekf_nees(vars(r.trajectory))).above,
-        header="EKF overconfident (share of steps above the chi-square band; 0.025)",
-        kinds=("recall", "failure", "baseline"),
-        digits=2,
-    )
-)
 declare_metric(
     Metric(
         name="answer_inside_95_share",
