@@ -251,3 +251,15 @@ def test_gallery_capture_stops_cleanly_on_a_signal(tmp_path, stop):
         time.sleep(0.1)
     assert_stops_cleanly(proc, stop, 130)
     assert not (out / "gallery.json").exists()
+
+
+def test_towns_lists_the_built_in_ones_and_generates_others(capsys, tmp_path):
+    assert main(["towns"]) == 0
+    assert "town01: town" in capsys.readouterr().out
+    out = tmp_path / "maps"
+    assert main(["towns", "--generate", "2", "--style", "city", "--seed", "3", "-o", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "gen-city-3-0: city" in printed and "route 500 m with 6 turns" in printed
+    assert sorted(p.name for p in out.iterdir()) == ["gen-city-3-0.png", "gen-city-3-1.png"]
+    assert main(["towns", "--generate", "2", "--style", "village", "-o", str(out)]) == 1
+    assert "unknown style 'village'; valid: city, town" in capsys.readouterr().err
