@@ -4,6 +4,7 @@
                                             [--queries 60] [--max-gain 512] [--shot-noise 0.02]
                                             [--read-noise 0.02] [--retrieval map|pose-prior]
                                             [--experiment FILE] [--shadows]
+                                            [--viewpoint "0,0;2,10;4,22.5"]
 
 Renders the gallery camera at ``--queries`` poses spread along the route (half-way between gallery
 images), at each illumination level k, localizes each with the method's map (built once under
@@ -16,7 +17,9 @@ that recall falls with k as the paper's does.
 map's retrieval: the local features alone, to tell their misses from the retrieval's.
 ``--experiment FILE`` takes ``--town`` and ``--method`` with their settings (gallery, mapping,
 localizer) from an experiment, so the maps are that experiment's. ``--shadows``: the sun casts
-shadows in the gallery (its own gallery and maps) and in the queries.
+shadows in the gallery (its own gallery and maps) and in the queries. ``--viewpoint`` sweeps the
+query camera's (raise m, pitch down deg) levels instead, at the first ``--k`` (the paper's Table 3
+has no recall to print beside).
 """
 
 from __future__ import annotations
@@ -36,7 +39,7 @@ from vlocbench.bench.towns import route_named, town_named
 from vlocbench.bench.visual import VisualLocalizer
 from vlocbench.geometry import planar_pose, pose_error
 from vlocbench.loc.localizer import RETRIEVAL_SOURCES
-from vlocbench.sim import Conditions, Exposure, Illumination, Simulator
+from vlocbench.sim import Conditions, Exposure, Illumination, Simulator, Viewpoint
 
 STAGES = ("features", "retrieval", "matching", "pnp")
 
@@ -58,6 +61,7 @@ def main() -> None:
         help="take --town and --method with their settings from this file",
     )
     ap.add_argument("--shadows", action="store_true", help="the sun's shadows, gallery too")
+    ap.add_argument("--viewpoint", help='(dz m, pitch down deg) levels, "0,0;2,10"')
     args = ap.parse_args()
     if args.experiment:  # its gallery, mapping and method settings: the maps it built
         plan = load_experiment(args.experiment)
@@ -101,15 +105,25 @@ def main() -> None:
     # best 5 map images within 10 m of the query (pose-prior retrieval: by construction); ms per
     # query: medians of the localizer's own time and of its stages' (time it on an idle machine)
     print(
-        "k | gain | exposure | T1 / T2 / T3 (%) | answered / wrong (%) | R@5 10 m (%)"
+        "level | gain | exposure | T1 / T2 / T3 (%) | answered / wrong (%) | R@1 / R@5 10 m (%)"
         " | ms per query (" + " / ".join(STAGES) + ")"
         " | paper AP-GeM / NetVLAD + SIFT T1"
     )
+    ks = [float(v) for v in args.k.split(",")]
+    levels = [(f"k={k:g}", k, Viewpoint()) for k in ks]
+    if args.viewpoint:
+        views = [tuple(float(v) for v in p.split(",")) for p in args.viewpoint.split(";")]
+        levels = [(f"{dz:g} m, {pitch:g} deg", ks[0], Viewpoint(dz, pitch)) for dz, pitch in views]
     sim = Simulator(town)
     try:
-        for k in (float(v) for v in args.k.split(",")):
+        for label, k, view in levels:
             sim.set_conditions(
-                Conditions(illumination=Illumination(k=k), exposure=exposure, shadows=args.shadows)
+                Conditions(
+                    illumination=Illumination(k=k),
+                    exposure=exposure,
+                    shadows=args.shadows,
+                    viewpoint=view,
+                )
             )
             pos, rot, ranked, seconds = [], [], [], []
             for (x, y), h in zip(xy, yaws):
@@ -130,16 +144,18 @@ def main() -> None:
             rec = recall(*errors)
             answered = float(np.mean(np.isfinite(errors[0])))
             wrong = confident_wrong(*errors)
-            r5 = place_recall(ranked, ranks=(5,), radii_m=(10.0,))[0]
+            r1, r5 = place_recall(ranked, ranks=(1, 5), radii_m=(10.0,))
             ref = " / ".join(
                 f"{t1_paper[m].get(int(k), float('nan')):.1f}"
                 for m in ("AP-GeM + SIFT", "NetVLAD + SIFT")
             )
+            if args.viewpoint:
+                ref = "–"
             gain, share = sim.renderer.gain, sim.renderer.exposure_share
             print(
-                f"{k:g} | {gain:.0f} | {share:.3g} | "
+                f"{label} | {gain:.0f} | {share:.3g} | "
                 + " / ".join(f"{100 * v:.1f}" for v in rec[:3])
-                + f" | {100 * answered:.1f} / {100 * wrong:.1f} | {100 * r5:.1f}"
+                + f" | {100 * answered:.1f} / {100 * wrong:.1f} | {100 * r1:.1f} / {100 * r5:.1f}"
                 + " | {:.0f} ({:.0f} / {:.0f} / {:.0f} / {:.0f})".format(
                     *1000 * np.median(seconds, axis=0)
                 )
