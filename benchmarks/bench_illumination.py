@@ -19,7 +19,8 @@ map's retrieval: the local features alone, to tell their misses from the retriev
 localizer) from an experiment, so the maps are that experiment's. ``--shadows``: the sun casts
 shadows in the gallery (its own gallery and maps) and in the queries. ``--viewpoint`` sweeps the
 query camera's (raise m, pitch down deg) levels instead, at the first ``--k`` (the paper's Table 3
-has no recall to print beside).
+has no recall to print beside). ``--per-query`` prints each query's position error, PnP inliers and
+how many of its 5 retrieved images lie within 10 m.
 """
 
 from __future__ import annotations
@@ -62,6 +63,11 @@ def main() -> None:
     )
     ap.add_argument("--shadows", action="store_true", help="the sun's shadows, gallery too")
     ap.add_argument("--viewpoint", help='(dz m, pitch down deg) levels, "0,0;2,10"')
+    ap.add_argument(
+        "--per-query",
+        action="store_true",
+        help="each query's position error, PnP inliers and retrieved images within 10 m",
+    )
     args = ap.parse_args()
     if args.experiment:  # its gallery, mapping and method settings: the maps it built
         plan = load_experiment(args.experiment)
@@ -138,6 +144,11 @@ def main() -> None:
                 pos.append(p)
                 rot.append(r)
                 ranked.append(e.retrieval_distances_m(truth))
+                if args.per_query:
+                    near = int(np.sum(np.asarray(ranked[-1])[:5] <= 10.0))
+                    print(
+                        f"  {label} query {len(pos)}: {p:.2f} m, {e.inliers} inliers, {near}/5 near"
+                    )
                 stages = e.stage_s
                 seconds.append([e.compute_time_s, *(stages.get(s, 0.0) for s in STAGES)])
             errors = np.array(pos), np.array(rot)
