@@ -66,3 +66,5 @@ def test_a_town_that_reverses_two_methods_breaks_the_agreement(three_towns):
     assert any(c.startswith("do the 3 towns rank the methods alike") for c in captions)
     [(_, (_, [row]))] = [(c, t) for c, t in report_tables(three_towns) if c.startswith("do the")]
     assert row[1] == "sift-vlad < sift < odometry only" and row[3] == "no: gen-city-1-1"
+    tied = dataclasses.replace(agreement, means=(2.0, 2.0, 10.0))
+    assert tied.ranking() == "sift-vlad = sift < odometry"

@@ -12,7 +12,7 @@ town's own: 1 where a town ranks the methods alike, -1 where it reverses them.
 from __future__ import annotations
 
 import itertools
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -42,7 +42,15 @@ class RankAgreement:
 
     setup: str
     order: tuple[str, ...]  # methods by their mean F across towns, fewest failures first
+    means: tuple[float, ...]  # their mean F across towns, in that order
     tau_by_town: dict[str, float]  # Kendall's tau-b, town's ranking against ``order`` (NaN: ties)
+
+    def ranking(self, label: Callable[[str], str] = str) -> str:
+        """``a < b = c``: the order, ties shown as such (each method as ``label`` names it)."""
+        text = label(self.order[0])
+        for k in range(1, len(self.order)):
+            text += (" = " if self.means[k] == self.means[k - 1] else " < ") + label(self.order[k])
+        return text
 
     @property
     def same_everywhere(self) -> bool:
@@ -143,8 +151,15 @@ def rank_agreement(summary: Summary, rows: Sequence[AcrossTowns]) -> list[RankAg
                 cell = summary.cell(town, m, setup.label)
                 own.append(cell.failure.mean if cell and cell.failure else float("nan"))
             tau[summary.town_names[town]] = kendall_tau_b(own, pooled)
-        order = tuple(m for _, m in sorted(zip(pooled, methods), key=lambda p: p[0]))
-        out.append(RankAgreement(setup=setup.label, order=order, tau_by_town=tau))
+        ranked = sorted(zip(pooled, methods), key=lambda p: p[0])
+        out.append(
+            RankAgreement(
+                setup=setup.label,
+                order=tuple(m for _, m in ranked),
+                means=tuple(f for f, _ in ranked),
+                tau_by_town=tau,
+            )
+        )
     return out
 
 

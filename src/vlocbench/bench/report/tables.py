@@ -261,7 +261,7 @@ def ranking_table(summary: Summary, agreements: Sequence[RankAgreement]) -> Tabl
         rows.append(
             [
                 setup_header(summary, a.setup),
-                " < ".join(method_label(m) for m in a.order),
+                a.ranking(method_label),
                 f"{fmt(a.tau_min, 2)} / {fmt(float(np.mean(taus)) if taus else np.nan, 2)}",
                 "yes"
                 if a.same_everywhere
