@@ -4,7 +4,7 @@
                                             [--queries 60] [--max-gain 512] [--shot-noise 0.02]
                                             [--read-noise 0.02] [--retrieval map|pose-prior]
                                             [--experiment FILE] [--shadows]
-                                            [--viewpoint "0,0;2,10;4,22.5"]
+                                            [--viewpoint "0,0;2,10;4,22.5"] [--setups FILE]
 
 Renders the gallery camera at ``--queries`` poses spread along the route (half-way between gallery
 images), at each illumination level k, localizes each with the method's map (built once under
@@ -19,7 +19,8 @@ map's retrieval: the local features alone, to tell their misses from the retriev
 localizer) from an experiment, so the maps are that experiment's. ``--shadows``: the sun casts
 shadows in the gallery (its own gallery and maps) and in the queries. ``--viewpoint`` sweeps the
 query camera's (raise m, pitch down deg) levels instead, at the first ``--k`` (the paper's Table 3
-has no recall to print beside). ``--per-query`` prints each query's position error, PnP inliers and
+has no recall to print beside). ``--setups FILE`` sweeps the conditions of that experiment's setups
+(``experiments/paper/weather.yaml``: the paper's fog and rain) with any method's map. ``--per-query`` prints each query's position error, PnP inliers and
 how many of its 5 retrieved images lie within 10 m.
 """
 
@@ -63,6 +64,7 @@ def main() -> None:
     )
     ap.add_argument("--shadows", action="store_true", help="the sun's shadows, gallery too")
     ap.add_argument("--viewpoint", help='(dz m, pitch down deg) levels, "0,0;2,10"')
+    ap.add_argument("--setups", type=Path, help="sweep the conditions of this experiment's setups")
     ap.add_argument(
         "--per-query",
         action="store_true",
@@ -116,21 +118,23 @@ def main() -> None:
         " | paper AP-GeM / NetVLAD + SIFT T1"
     )
     ks = [float(v) for v in args.k.split(",")]
-    levels = [(f"k={k:g}", k, Viewpoint()) for k in ks]
+    levels = [
+        (f"k={k:g}", Conditions(illumination=Illumination(k=k), exposure=exposure)) for k in ks
+    ]
     if args.viewpoint:
+        noon = levels[0][1]
         views = [tuple(float(v) for v in p.split(",")) for p in args.viewpoint.split(";")]
-        levels = [(f"{dz:g} m, {pitch:g} deg", ks[0], Viewpoint(dz, pitch)) for dz, pitch in views]
+        levels = [
+            (f"{dz:g} m, {deg:g} deg", dataclasses.replace(noon, viewpoint=Viewpoint(dz, deg)))
+            for dz, deg in views
+        ]
+    if args.setups:
+        levels = [(s.label, s.conditions) for s in load_experiment(args.setups).setups]
     sim = Simulator(town)
     try:
-        for label, k, view in levels:
-            sim.set_conditions(
-                Conditions(
-                    illumination=Illumination(k=k),
-                    exposure=exposure,
-                    shadows=args.shadows,
-                    viewpoint=view,
-                )
-            )
+        for label, conditions in levels:
+            sim.set_conditions(dataclasses.replace(conditions, shadows=args.shadows))
+            k = conditions.illumination.k
             pos, rot, ranked, seconds = [], [], [], []
             for (x, y), h in zip(xy, yaws):
                 sim.teleport(float(x), float(y), float(h))
@@ -160,7 +164,7 @@ def main() -> None:
                 f"{t1_paper[m].get(int(k), float('nan')):.1f}"
                 for m in ("AP-GeM + SIFT", "NetVLAD + SIFT")
             )
-            if args.viewpoint:
+            if args.viewpoint or args.setups:
                 ref = "–"
             gain, share = sim.renderer.gain, sim.renderer.exposure_share
             print(
