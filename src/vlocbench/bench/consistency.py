@@ -25,6 +25,7 @@ from typing import Any
 
 import numpy as np
 
+from vlocbench.bench.records import WRONG_THRESHOLD
 from vlocbench.geometry import wrap_angle
 from vlocbench.interfaces import Array
 
@@ -40,7 +41,6 @@ COV_COLUMNS = (
     "ekf_cov_yyaw_mrad",
     "ekf_cov_yawyaw_rad2",
 )
-CORRECT_M, CORRECT_DEG = 5.0, 10.0  # an answer is right within these (the paper's coarsest)
 TARGET_PRECISION = 0.95
 
 
@@ -133,8 +133,8 @@ def _answers(locs: Mapping[str, Any]) -> tuple[Array, Array, Array]:
     cov = np.array(
         [np.reshape(c, (3, 3)) if len(c) == 9 else np.full((3, 3), np.nan) for c in covs]
     )
-    right = (np.asarray(locs["position_error_3d_m"], np.float64)[ok] <= CORRECT_M) & (
-        np.asarray(locs["rotation_error_deg"], np.float64)[ok] <= CORRECT_DEG
+    right = (np.asarray(locs["position_error_3d_m"], np.float64)[ok] <= WRONG_THRESHOLD[0]) & (
+        np.asarray(locs["rotation_error_deg"], np.float64)[ok] <= WRONG_THRESHOLD[1]
     )
     return errors, cov.reshape(-1, 3, 3), right
 

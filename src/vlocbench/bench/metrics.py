@@ -21,6 +21,7 @@ from numpy.typing import NDArray
 from vlocbench.bench.consistency import answer_nees, consistency, ekf_nees
 from vlocbench.bench.records import (
     EPISODE_KINDS,
+    WRONG_THRESHOLD,
     EpisodeKind,
     EpisodeResult,
     localization_columns,
@@ -39,7 +40,6 @@ RECALL_THRESHOLDS: tuple[tuple[float, float], ...] = (
     (20.0, 180.0),
 )
 HOTSPOT_BIN_M = 25.0  # failure sites closer than this along the route count as one place
-WRONG_THRESHOLD: tuple[float, float] = (5.0, 10.0)  # a returned pose beyond this is wrong
 PLACE_RANKS = (1, 5, 10)  # place recognition's Recall@N ...
 PLACE_RADII_M = (5.0, 10.0, 25.0)  # ... within these distances (the paper's evaluator's)
 # failure-free stretches this short or shorter are left out of the drift figure: the paper's

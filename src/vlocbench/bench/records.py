@@ -14,6 +14,8 @@ from vlocbench.interfaces import Array
 # method's poses, and the drive on wheel odometry alone
 EpisodeKind = Literal["recall", "failure", "baseline"]
 EPISODE_KINDS: tuple[str, ...] = get_args(EpisodeKind)
+# (position m, rotation deg): a returned pose beyond this is wrong (the paper's coarsest recall)
+WRONG_THRESHOLD: tuple[float, float] = (5.0, 10.0)
 
 
 def per_km(count: float, covered_m: float) -> float:

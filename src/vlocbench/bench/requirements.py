@@ -18,10 +18,11 @@ import numpy as np
 
 from vlocbench.bench.methods import MethodSpec
 from vlocbench.bench.metrics import FailureRate
+from vlocbench.bench.records import WRONG_THRESHOLD
 from vlocbench.bench.summary import BASELINE, Summary
 
 RAYLEIGH_MEDIAN = float(np.sqrt(2 * np.log(2)))  # median / sigma of a 2D Gaussian's distance
-FAR_M = 5.0
+FAR_M = WRONG_THRESHOLD[0]  # an answer this far off is wrong, whatever its rotation
 
 
 @dataclass(frozen=True)
