@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from vlocbench.bench.metrics import bootstrap_means, percentile_interval
 from vlocbench.bench.summary import Summary
 
 RESAMPLES = 2000
@@ -85,25 +86,16 @@ def kendall_tau_b(x: Sequence[float], y: Sequence[float]) -> float:
     return float((concordant - discordant) / np.sqrt(n_x * n_y))
 
 
-def _interval(means: np.ndarray) -> tuple[float, float]:
-    low, high = np.percentile(means, [2.5, 97.5])
-    return float(low), float(high)
-
-
 def _over_towns(values: Sequence[float], rng: np.random.Generator) -> tuple[float, float]:
-    x = np.asarray(values, np.float64)
-    return _interval(x[rng.integers(0, len(x), (RESAMPLES, len(x)))].mean(axis=1))
+    return percentile_interval(bootstrap_means(values, rng, RESAMPLES))
 
 
 def _over_repetitions(
     per_town: Sequence[Sequence[float]], rng: np.random.Generator
 ) -> tuple[float, float]:
     """The mean over towns with each town's repetitions drawn again."""
-    town_means = [
-        np.asarray(r, np.float64)[rng.integers(0, len(r), (RESAMPLES, len(r)))].mean(axis=1)
-        for r in per_town
-    ]
-    return _interval(np.mean(town_means, axis=0))
+    town_means = [bootstrap_means(r, rng, RESAMPLES) for r in per_town]
+    return percentile_interval(np.mean(town_means, axis=0))
 
 
 def across_towns(summary: Summary, seed: int = 0) -> list[AcrossTowns]:

@@ -300,6 +300,20 @@ class FailureRate:
     per_repetition: tuple[float, ...] = ()  # each repetition's r_i / L_km
 
 
+def bootstrap_means(
+    values: Sequence[float] | NDArray[np.float64], rng: np.random.Generator, resamples: int
+) -> NDArray[np.float64]:
+    """(resamples,) means of ``values`` drawn again with replacement."""
+    x = np.asarray(values, np.float64)
+    return x[rng.integers(0, len(x), (resamples, len(x)))].mean(axis=1)
+
+
+def percentile_interval(means: NDArray[np.float64]) -> tuple[float, float]:
+    """The 95 % percentile interval of bootstrap ``means``."""
+    low, high = np.percentile(means, [2.5, 97.5])
+    return float(low), float(high)
+
+
 def failure_rate(
     failures_per_km: Sequence[float], resamples: int = 2000, seed: int = 0
 ) -> FailureRate:
@@ -308,10 +322,9 @@ def failure_rate(
     x = np.asarray(failures_per_km, np.float64)
     if len(x) == 0:
         return FailureRate(float("nan"), float("nan"), float("nan"), 0)
-    rng = np.random.default_rng(seed)
-    means = x[rng.integers(0, len(x), (resamples, len(x)))].mean(axis=1)
-    low, high = np.percentile(means, [2.5, 97.5])
-    return FailureRate(float(x.mean()), float(low), float(high), len(x), tuple(map(float, x)))
+    means = bootstrap_means(x, np.random.default_rng(seed), resamples)
+    low, high = percentile_interval(means)
+    return FailureRate(float(x.mean()), low, high, len(x), tuple(map(float, x)))
 
 
 def failure_rate_by_cause(
