@@ -136,13 +136,12 @@ def rank_agreement(summary: Summary, rows: Sequence[AcrossTowns]) -> list[RankAg
             continue
         methods = [r.method for r in here]
         pooled = [r.failure_mean for r in here]
-        tau = {}
-        for town in summary.towns:
-            own = []
-            for m in methods:
-                cell = summary.cell(town, m, setup.label)
-                own.append(cell.failure.mean if cell and cell.failure else float("nan"))
-            tau[summary.town_names[town]] = kendall_tau_b(own, pooled)
+        tau = {
+            summary.town_names[town]: kendall_tau_b(
+                [summary.failure_mean(town, m, setup.label) for m in methods], pooled
+            )
+            for town in summary.towns
+        }
         ranked = sorted(zip(pooled, methods), key=lambda p: p[0])
         out.append(
             RankAgreement(

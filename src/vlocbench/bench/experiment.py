@@ -270,6 +270,12 @@ class ExperimentPlan:
         )
         return dataclasses.replace(self, spec=part)
 
+    def methods_of(self, setup: Setup) -> tuple[MethodSpec, ...]:
+        """The plan's methods as ``setup`` runs them, its swept ``methods.NAME.*`` values set (a
+        part of the plan, :meth:`only`, keeps its own methods)."""
+        names = {m.name for m in self.spec.methods}
+        return tuple(m for m in setup.methods or self.spec.methods if m.name in names)
+
     def gallery_key(self, town: str) -> str:
         """What determines a town's gallery: the town, the route, the drive and the scene
         version."""
@@ -306,8 +312,7 @@ class ExperimentPlan:
     def _jobs(self, setup: Setup) -> list[tuple[EpisodeKind, MethodSpec | None, int]]:
         s = self.spec
         jobs: list[tuple[EpisodeKind, MethodSpec | None, int]] = []
-        names = {m.name for m in s.methods}  # a part of the plan (only()) keeps its methods
-        for method in (m for m in setup.methods or s.methods if m.name in names):
+        for method in self.methods_of(setup):
             if s.recall:
                 jobs.append(("recall", method, 0))
             if s.failure:

@@ -78,9 +78,7 @@ def oracle_sweeps(summary: Summary, town: str) -> list[OracleSweep]:
     for name in summary.methods:
         points = []
         for setup in summary.setups:
-            method = next(
-                (m for m in setup.methods or summary.spec.methods if m.name == name), None
-            )
+            method = next((m for m in summary.plan.methods_of(setup) if m.name == name), None)
             sigma = oracle_sigma_m(method) if method is not None else None
             cell = summary.cell(town, name, setup.label)
             if sigma is not None and cell is not None and cell.failure is not None:

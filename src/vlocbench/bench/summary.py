@@ -81,6 +81,11 @@ class Summary:
     def cell(self, town: str, method: str, setup: str) -> Cell | None:
         return self.cells.get((town, method, setup))
 
+    def failure_mean(self, town: str, method: str, setup: str) -> float:
+        """A cell's F (failures/km, mean over its repetitions); NaN without failure episodes."""
+        c = self.cell(town, method, setup)
+        return c.failure.mean if c is not None and c.failure is not None else float("nan")
+
     def level_values(self) -> list[float] | None:
         """The numeric levels of the one swept key, when there is exactly one and it is numeric."""
         if len(self.axis) != 1:

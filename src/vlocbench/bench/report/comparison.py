@@ -43,7 +43,7 @@ def ours_per_setup(summary: Summary, town: str, method: str) -> tuple[list[float
     f, t1 = [], []
     for s in summary.setups:
         c = summary.cell(town, method, s.label)
-        f.append(c.failure.mean if c is not None and c.failure is not None else float("nan"))
+        f.append(summary.failure_mean(town, method, s.label))
         t1.append(100 * c.recall[0] if c is not None and c.recall else float("nan"))
     return f, t1
 

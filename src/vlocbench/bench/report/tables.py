@@ -319,24 +319,17 @@ def verdict_table(summary: Summary, town: str) -> Table:
     if len(summary.axis) != 1:
         return header, []
     labels = [s.label for s in summary.setups]
-    odometry = [summary.cell(town, BASELINE, label) for label in labels]
+    odometry = [summary.failure_mean(town, BASELINE, label) for label in labels]
     rows = []
     for method in (m for m in summary.methods if m != BASELINE):
-        f = [summary.cell(town, method, label) for label in labels]
-        means = [c.failure.mean if c and c.failure else np.nan for c in f]
+        means = [summary.failure_mean(town, method, label) for label in labels]
         if not np.isfinite(means).all():
             continue
         ok = 0
         while ok < len(means) and means[ok] <= 1.0:
             ok += 1
-        cross = next(
-            (
-                k
-                for k, (m, o) in enumerate(zip(means, odometry))
-                if o is not None and o.failure is not None and m > o.failure.mean
-            ),
-            None,
-        )
+        # NaN where the odometry line was not driven: never crossed there
+        cross = next((k for k, (m, o) in enumerate(zip(means, odometry)) if m > o), None)
         rows.append(
             [
                 method,
