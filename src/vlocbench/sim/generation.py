@@ -29,7 +29,7 @@ import numpy as np
 from vlocbench.config import from_dict, require, require_one_of
 from vlocbench.errors import ConfigError
 from vlocbench.sim.roads import RoadLayout, build_route
-from vlocbench.sim.town import ROUTE_LENGTH_TOLERANCE, RoadSpec, TownSpec
+from vlocbench.sim.town import ROUTE_LENGTH_TOLERANCE, RoadSpec, TownSpec, road_layout
 
 Style = Literal["town", "city"]
 STYLES: tuple[str, ...] = get_args(Style)
@@ -261,14 +261,7 @@ def _draw_route(
     passes an intersection twice and keeps buildings on its right; None when this layout's draws
     found none."""
     widths, depths = data["block_widths_m"], data["block_depths_m"]
-    road = RoadSpec(**data.get("road", {}))
-    layout = RoadLayout(
-        np.concatenate([[0.0], np.cumsum(widths)]),
-        np.concatenate([[0.0], np.cumsum(depths)]),
-        road.lane_width_m,
-        road.corner_radius_m,
-        road.lanes_per_direction,
-    )
+    layout = road_layout(widths, depths, RoadSpec(**data.get("road", {})))
     nx_, ny_ = len(widths), len(depths)
     bad_sides = {tuple(p) for p in data.get("parks", [])} | {data.get("beach_side", "none")}
     for _ in range(50):

@@ -145,6 +145,19 @@ class TownSpec:
         return from_dict(cls, load_yaml(path))
 
 
+def road_layout(
+    block_widths_m: tuple[float, ...], block_depths_m: tuple[float, ...], road: RoadSpec
+) -> RoadLayout:
+    """The road grid of blocks this wide and deep (m), its first centre line at 0."""
+    return RoadLayout(
+        np.concatenate([[0.0], np.cumsum(block_widths_m)]),
+        np.concatenate([[0.0], np.cumsum(block_depths_m)]),
+        road.lane_width_m,
+        road.corner_radius_m,
+        road.lanes_per_direction,
+    )
+
+
 def builtin_town_names() -> list[str]:
     folder = resources.files("vlocbench.sim") / "towns"
     return sorted(
@@ -244,12 +257,7 @@ class _Builder:
     def __init__(self, spec: TownSpec) -> None:
         self.spec = spec
         self.rng = np.random.default_rng(spec.seed)
-        xs = np.concatenate([[0.0], np.cumsum(spec.block_widths_m)])
-        ys = np.concatenate([[0.0], np.cumsum(spec.block_depths_m)])
-        road = spec.road
-        self.layout = RoadLayout(
-            xs, ys, road.lane_width_m, road.corner_radius_m, road.lanes_per_direction
-        )
+        self.layout = road_layout(spec.block_widths_m, spec.block_depths_m, spec.road)
         self.hw = self.layout.half_width_m
         self.sw = spec.road.sidewalk_width_m
         self.platforms: list[Platform] = []
