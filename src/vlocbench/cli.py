@@ -3,12 +3,14 @@
 
 from __future__ import annotations
 
+import _thread
 import argparse
 import contextlib
 import logging
 import os
 import signal
 import sys
+import threading
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -268,15 +270,35 @@ def _export(args: argparse.Namespace) -> int:
 def _signals_interrupt() -> Iterator[None]:
     """SIGTERM, and SIGINT even where a shell started the command in the background with it
     ignored, interrupt it as Ctrl-C does: a run's workers stop, the store and the caches keep what
-    they have (a gallery or a map is written last, so an interrupted one is made again)."""
+    they have (a gallery or a map is written last, so an interrupted one is made again).
+
+    A signal whose handler ran inside a finalizer (a weakref callback or ``__del__`` run by the
+    garbage collector) has its KeyboardInterrupt swallowed by Python, which passes it to
+    ``sys.unraisablehook``; the hook has a thread send the signal again once the hook has
+    returned (sent at once, it would be handled inside the hook and swallowed again), so it lands
+    in ordinary code."""
+    stopping = {signal.Signals(sig).name: sig for sig in (signal.SIGINT, signal.SIGTERM)}
 
     def interrupt(signum: int, frame: object) -> None:
         raise KeyboardInterrupt(signal.Signals(signum).name)
 
-    old = {sig: signal.signal(sig, interrupt) for sig in (signal.SIGINT, signal.SIGTERM)}
+    previous_hook = sys.unraisablehook
+
+    def resend_swallowed(unraisable: Any) -> None:
+        exc = unraisable.exc_value
+        if isinstance(exc, KeyboardInterrupt) and exc.args and exc.args[0] in stopping:
+            resend = threading.Timer(0.01, _thread.interrupt_main, (stopping[exc.args[0]],))
+            resend.daemon = True
+            resend.start()
+        else:
+            previous_hook(unraisable)
+
+    old = {sig: signal.signal(sig, interrupt) for sig in stopping.values()}
+    sys.unraisablehook = resend_swallowed
     try:
         yield
     finally:
+        sys.unraisablehook = previous_hook
         for sig, handler in old.items():
             signal.signal(sig, handler)
 
