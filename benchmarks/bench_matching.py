@@ -32,7 +32,7 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=3)
     args = ap.parse_args()
 
-    plan = load_experiment({"name": "bench", "towns": [args.town], "methods": ["sift-vlad"]})
+    plan = load_experiment({"name": "bench", "towns": [args.town], "methods": ["sift"]})
     gallery = prepare_gallery(plan, args.town, progress=True)
     extractor = build_features(args.features)
     first = len(gallery) // 3  # the route's middle, away from its ends

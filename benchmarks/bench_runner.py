@@ -33,7 +33,7 @@ EXPERIMENT = {
     "name": "bench_runner",
     "towns": ["town10"],
     "route_length_m": 150,
-    "methods": ["sift-vlad"],
+    "methods": ["sift"],
     "sweep": {"illumination.k": [0, 3, 6, 9]},
     "repetitions": 1,
 }

@@ -79,7 +79,7 @@ def sift_map(gallery, tmp_path_factory):
     from vlocbench.loc.registry import method_conf
 
     out = tmp_path_factory.mktemp("map") / "sift"
-    report = build_map(gallery, method_conf("sift-vlad"), out)
+    report = build_map(gallery, method_conf("sift"), out)
     return out, report
 
 
@@ -123,7 +123,7 @@ def tiny(tmp_path_factory):
         "name": "tiny",
         "towns": [str(root / "small.yaml")],
         "route_length_m": 60,
-        "methods": ["sift-vlad"],
+        "methods": ["sift"],
         "sweep": {"illumination.k": [0, 6]},
         "repetitions": 1,
         "baseline_repetitions": 1,  # one odometry drive: the suite stays fast

@@ -89,7 +89,7 @@ def test_gallery_build_map_and_localize(tmp_path, capsys):
     args = ["--width", "320", "--height", "240", "--spacing", "4"]
     assert main(["gallery", "capture", str(spec), "--out", str(gallery), *args]) == 0
     assert "wrote" in capsys.readouterr().out
-    assert main(["build-map", str(gallery), "--method", "sift-vlad", "--out", str(maps)]) == 0
+    assert main(["build-map", str(gallery), "--method", "sift", "--out", str(maps)]) == 0
     assert "points, mean track length" in capsys.readouterr().out
     image = gallery / "images" / "00008_gallery.png"
     assert main(["localize", str(image), "--map", str(maps)]) == 0
@@ -165,13 +165,11 @@ def test_cli_run_and_report_errors(tiny, tmp_path, capsys):
     root, _ = tiny
     bad = tmp_path / "bad.yaml"
     bad.write_text(
-        yaml.safe_dump(
-            {"towns": ["town10"], "methods": ["sift-vlad"], "sweep": {"weather.fogg": [10]}}
-        )
+        yaml.safe_dump({"towns": ["town10"], "methods": ["sift"], "sweep": {"weather.fogg": [10]}})
     )
     assert main(["run", str(bad)]) == 1
     assert (
-        "valid: deposits, fog_model, fog_ramp_m, fog_visual_range_m, overcast, rain, wetness"
+        "valid: deposits, fog_model, fog_ramp_m, fog_visual_range_m, overcast, rain, rain_streaks_per_kpx, wetness"
         in (capsys.readouterr().err)
     )
     other = tmp_path / "other.yaml"
@@ -230,7 +228,7 @@ def test_build_map_stops_cleanly_on_a_signal_and_a_rerun_finishes(gallery, tmp_p
         "build-map",
         str(gallery.root),
         "--method",
-        "sift-vlad",
+        "sift",
         "--out",
         str(out),
     ]

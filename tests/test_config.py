@@ -29,3 +29,18 @@ def test_an_added_option_and_a_changed_default_keep_the_stored_keys():
     assert config_hash(Changed(antialias=True)) == stored
     assert config_hash(Changed()) not in (stored, config_hash(Added()))
     assert config_hash(Changed()) == config_hash(Added(antialias=False))
+
+
+@dataclasses.dataclass(frozen=True)
+class Rainy:
+    rain: float = 0.0
+    streaks: float = dataclasses.field(
+        default=0.9, metadata=default_changed(0.45, only_with="rain")
+    )
+
+
+def test_a_field_that_needs_another_is_hashed_only_with_it():
+    dry = config_hash(Rainy())
+    assert config_hash(Rainy(streaks=2.0)) == dry  # no rain: its streaks change nothing
+    assert config_hash(Rainy(rain=1.0, streaks=0.45)) == config_hash({"rain": 1.0})
+    assert config_hash(Rainy(rain=1.0)) != config_hash(Rainy(rain=1.0, streaks=0.45))

@@ -26,7 +26,7 @@ def test_episodes_as_a_dataframe_give_the_reports_numbers(tiny):
         assert summary.cell(town, method, setup).failure.mean == pytest.approx(value)
     recall = df[df.kind == "recall"].set_index("setup")
     for setup, t1 in recall["recall_0.25m_2deg"].items():
-        assert summary.cell(town, "sift-vlad", setup).recall[0] == pytest.approx(t1)
+        assert summary.cell(town, "sift", setup).recall[0] == pytest.approx(t1)
 
     one = recall.iloc[0]
     traj, locs = results.trajectory(out, one.key), results.localizations(out, one.key)

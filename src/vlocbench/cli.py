@@ -367,7 +367,7 @@ def _build_map(args: argparse.Namespace) -> int:
     mapping = MappingConfig(
         pairs=args.pairs, num_pairs=args.num_pairs, verification=args.verification
     )
-    out = args.out or default_map_dir("maps", gallery, args.method, conf, mapping)
+    out = args.out or default_map_dir("maps", gallery, conf, mapping)
 
     def progress(stage: str, done: int, total: int) -> None:
         if done == total or done % 50 == 0:
@@ -574,7 +574,7 @@ def _add_map_verbs(sub: Any, shared: dict[str, argparse.ArgumentParser]) -> None
     p = sub.add_parser("build-map", help="features, matches and triangulation of a gallery")
     p.add_argument("gallery", type=Path, help="gallery folder (see `vlocbench gallery`)")
     p.add_argument("--method", default="sift", help="sift, orb-teblid, aliked-lightglue, ...")
-    p.add_argument("--out", type=Path, help="map folder (default: maps/GALLERY/METHOD-HASH)")
+    p.add_argument("--out", type=Path, help="map folder (default: maps/GALLERY/FEATURES-HASH)")
     p.add_argument(
         "--pairs",
         choices=("retrieval", "poses"),

@@ -135,20 +135,25 @@ def to_dict(config: Any) -> Any:
 ADDED_OPTION = {"hash": "omit_default"}
 
 
-def default_changed(was: Any) -> dict[str, Any]:
+def default_changed(was: Any, *, only_with: str | None = None) -> dict[str, Any]:
     """Field metadata of an ADDED_OPTION whose default later changed from ``was``: at ``was`` it
     is still left out of config_hash (stored keys still match), at the new default it is not (so
-    results at the new default never take the old ones' keys)."""
-    return {"hash": "omit_value", "omit": was}
+    results at the new default never take the old ones' keys). ``only_with``: a field of the same
+    config without which this one does nothing (the rain's streaks without rain); where that one
+    is falsy, this one is left out of the hash whatever its value."""
+    return {"hash": "omit_value", "omit": was, "only_with": only_with}
 
 
 def _hashed(config: Any) -> Any:
-    """``to_dict`` for hashing: ADDED_OPTION fields at their default are left out."""
+    """``to_dict`` for hashing: ADDED_OPTION fields at their default are left out, and fields
+    whose ``only_with`` field is falsy."""
     if dataclasses.is_dataclass(config) and not isinstance(config, type):
         out = {}
         for f in dataclasses.fields(config):
             value = getattr(config, f.name)
             rule = f.metadata.get("hash")
+            if f.metadata.get("only_with") and not getattr(config, f.metadata["only_with"]):
+                continue
             if rule == "omit_default" and value == _default(f):
                 continue
             if rule == "omit_value" and value == f.metadata["omit"]:

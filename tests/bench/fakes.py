@@ -143,7 +143,7 @@ def fake_tasks():
         {
             "name": "fake",
             "towns": ["town10"],
-            "methods": ["sift-vlad"],
+            "methods": ["sift"],
             "sweep": {"illumination.k": [0, 6]},
             "repetitions": 2,
         }
@@ -173,7 +173,7 @@ def run_fake_plans(root, *plans):
 ILL_SPEC = {
     "name": "ill",
     "towns": ["town10"],
-    "methods": ["sift-vlad"],
+    "methods": ["sift"],
     "repetitions": 1,
     "baseline_repetitions": 1,
 }

@@ -18,8 +18,8 @@ from vlocbench.bench.store import DB_FILE, ResultStore
 
 def test_local_pool_retries_the_episode_of_a_dead_worker(tmp_path, control):
     tasks = fake_tasks()
-    (control / "die-illumination.k=6-sift-vlad-1").touch()  # one failure episode's worker dies once
-    (control / "always-die-illumination.k=0-sift-vlad-0").touch()  # these die on every attempt
+    (control / "die-illumination.k=6-sift-1").touch()  # one failure episode's worker dies once
+    (control / "always-die-illumination.k=0-sift-0").touch()  # these die on every attempt
     with ResultStore(tmp_path / "out", "fake") as store:
         e = execute(tasks, store, workers=2, runner=run_fake, progress=False)
         finished, errors, retried = e.finished, e.errors, e.retried
@@ -94,7 +94,7 @@ def _alive(pids):
 def test_a_killed_or_interrupted_run_leaves_no_process_and_a_consistent_store(
     tmp_path, control, how
 ):
-    (control / "sleep-illumination.k=0-sift-vlad-0").write_text("0")  # its two episodes finish
+    (control / "sleep-illumination.k=0-sift-0").write_text("0")  # its two episodes finish
     (control / "sleep-all").write_text("60")
     env = {**os.environ, "PYTHONPATH": os.getcwd(), CONTROL_ENV: str(control)}
     driver = subprocess.Popen(
@@ -143,7 +143,7 @@ def dask_cluster(tmp_path):
 
 def test_dask_cluster_on_loopback(tmp_path, control, dask_cluster):
     tasks = fake_tasks()
-    (control / "die-illumination.k=6-sift-vlad-1").touch()
+    (control / "die-illumination.k=6-sift-1").touch()
     with ResultStore(tmp_path / "out", "fake") as store:
         e = execute(
             tasks, store, scheduler=dask_cluster.scheduler_address, runner=run_fake, progress=False
@@ -152,7 +152,7 @@ def test_dask_cluster_on_loopback(tmp_path, control, dask_cluster):
     assert (e.finished, e.errors) == (len(tasks), 0)
     assert e.slots == 2  # the cluster's threads, whatever --workers says
     assert (e.workers_lost, e.retried) == (1, 1)  # the summary says a worker died
-    assert not (control / "die-illumination.k=6-sift-vlad-1").exists()  # it did die, once
+    assert not (control / "die-illumination.k=6-sift-1").exists()  # it did die, once
 
 
 def test_an_interrupted_dask_run_leaves_the_cluster_idle(tmp_path, control, dask_cluster):

@@ -182,7 +182,7 @@ def test_a_metric_is_one_declaration(tmp_path, declared):
     files = write_report(tmp_path, examples=False)
     # the fakes: failure drives of repetition 0 fail 0 times, odometry drives 3 times
     summary = files.summary
-    assert summary.cell("town10", "sift-vlad", "illumination.k=6").extra["reinits_x10"] == 0.0
+    assert summary.cell("town10", "sift", "illumination.k=6").extra["reinits_x10"] == 0.0
     assert summary.cell("town10", "odometry", "illumination.k=6").extra["reinits_x10"] == 30.0
     md = files.markdown.read_text()
     assert "town10: declared metrics" in md and "| 10 x failures |" in md

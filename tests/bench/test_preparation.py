@@ -23,7 +23,7 @@ def test_galleries_and_maps_made_side_by_side_equal_those_made_in_turn(tiny, tmp
     spec.update(towns=[spec["towns"][0], str(other)], cache=str(tmp_path / "cache"))
     maps = prepare_maps(load_experiment(spec), workers=2)
     assert len(maps) == 2 and all((Path(m) / MAP_FILE).exists() for m in maps.values())
-    side_by_side = Path(maps[(spec["towns"][0], "sift-vlad")])
+    side_by_side = Path(maps[(spec["towns"][0], "sift")])
     in_turn = root / "cache" / side_by_side.relative_to(tmp_path / "cache")
     images = sorted((root / "cache" / "galleries").glob("*/images/*"))
     assert images

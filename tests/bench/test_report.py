@@ -12,8 +12,8 @@ def test_report_of_a_run(tiny):
     root, _ = tiny
     files = write_report(root / "out")
     md = files.markdown.read_text()
-    assert "| sift-vlad |" in md and "| odometry only |" in md and "k=6" in md
-    assert "place recognition alone" in md and "| sift-vlad | 25 m |" in md
+    assert "| sift |" in md and "| odometry only |" in md and "k=6" in md
+    assert "place recognition alone" in md and "| sift | 25 m |" in md
     assert "/km) |" in md  # the fused recall with the EKF's lock losses in the ground-truth drive
     assert r"\begin{tabular}" in files.latex.read_text()
     assert {p.name for p in files.figures} == {
@@ -23,7 +23,7 @@ def test_report_of_a_run(tiny):
         "computation_time.png",
         "confidence_small.png",
     }
-    assert "can the answers' confidence be trusted" in md and "| sift-vlad | k=0 | inliers |" in md
+    assert "can the answers' confidence be trusted" in md and "| sift | k=0 | inliers |" in md
     assert "small: verdict, over illumination.k" in md
     page = files.html.read_text()
     assert page.count("data:image/png;base64,") == 5
@@ -50,7 +50,7 @@ def test_a_sweep_run_in_parts_is_reported_whole(tmp_path, capsys):
     summary, planned = files.summary, plan.tasks()
     assert summary.episodes == summary.planned == len(planned) == 5  # (recall, failure) x 2, base
     for label in ("illumination.k=0", "illumination.k=6"):
-        cell = summary.cell("town10", "sift-vlad", label)
+        cell = summary.cell("town10", "sift", label)
         assert cell is not None and cell.failure is not None and cell.recall is not None, label
         assert cell.keys <= {t.key for t in planned}  # none of the other gallery's
     assert "5 of 5 episodes" in files.html.read_text()

@@ -55,7 +55,7 @@ def test_a_requirements_run_places_a_real_method_on_the_oracle_sweep(tiny, tmp_p
     spec = yaml.safe_load((root / "tiny.yaml").read_text())
     spec.update(
         name="req",
-        methods=["sift-vlad", {"name": "oracle", "kind": "oracle"}],
+        methods=["sift", {"name": "oracle", "kind": "oracle"}],
         sweep={"methods.oracle.args.position_sigma_m": [0.0, 3.0]},
         output=str(tmp_path / "out"),
     )
@@ -68,6 +68,6 @@ def test_a_requirements_run_places_a_real_method_on_the_oracle_sweep(tiny, tmp_p
     assert "requirements_small.png" in {p.name for p in files.figures}
     md = files.markdown.read_text()
     section = md.split("**small: how accurate must localization be?")[1].split("**")[1]
-    [row] = [r for r in section.splitlines() if r.startswith("| sift-vlad | ")]
+    [row] = [r for r in section.splitlines() if r.startswith("| sift | ")]
     sigma = float(row.split("|")[2])
     assert 0 < sigma < 1  # it localizes on its own map, to well under a metre

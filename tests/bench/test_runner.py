@@ -60,7 +60,7 @@ def test_episodes_driven_on_another_capture_of_the_gallery_are_not_mixed_in(tiny
             "SELECT key, json_extract(config, '$.map_dir') FROM episodes WHERE kind = 'recall'"
             " LIMIT 1"
         ).fetchall()
-        moved = str(Path(map_dir).parent.with_name("small-0123456789-fedcba9876") / "sift-vlad")
+        moved = str(Path(map_dir).parent.with_name("small-0123456789-fedcba9876") / "sift")
         db.execute(
             "UPDATE episodes SET config = json_set(config, '$.map_dir', ?) WHERE key = ?",
             (moved, key),

@@ -16,7 +16,7 @@ def test_a_grouped_sweep_whose_keys_are_not_sorted_reports_every_cell(tmp_path):
         {
             "name": "wx",
             "towns": ["town10"],
-            "methods": ["sift-vlad"],
+            "methods": ["sift"],
             "repetitions": 1,
             "sweep": {"weather": levels},
         }
@@ -33,10 +33,10 @@ def test_a_grouped_sweep_whose_keys_are_not_sorted_reports_every_cell(tmp_path):
         "weather(fog_visual_range_m=30, overcast=0.8, rain=0.8)",
     ]
     for label in labels:
-        for method in ("sift-vlad", "odometry"):
+        for method in ("sift", "odometry"):
             cell = summary.cell("town10", method, label)
             assert cell is not None and cell.failure is not None, (method, label)
-        assert summary.cell("town10", "sift-vlad", label).recall is not None
+        assert summary.cell("town10", "sift", label).recall is not None
 
 
 def test_episodes_another_sweep_ran_first_count_under_this_plans_setups(tmp_path):
@@ -48,7 +48,7 @@ def test_episodes_another_sweep_ran_first_count_under_this_plans_setups(tmp_path
     assert {r.setup for r in rows} == {"default", "illumination.k=6"}  # as each run stored them
     summary = summarize(plan_from_stored(stored), rows)
     for label in ("illumination.k=0", "illumination.k=6"):
-        cell = summary.cell("town10", "sift-vlad", label)
+        cell = summary.cell("town10", "sift", label)
         assert cell is not None and cell.failure is not None and cell.recall is not None, label
 
 
@@ -64,7 +64,7 @@ def test_an_old_runs_report_shows_its_episodes_where_they_were_stored(tmp_path, 
     assert not {t.key for t in plan.tasks()} & {r.key for r in rows}
     summary = summarize(plan, rows)
     for label in ("illumination.k=0", "illumination.k=6"):
-        for method in ("sift-vlad", "odometry"):
+        for method in ("sift", "odometry"):
             cell = summary.cell("town10", method, label)
             assert cell is not None and cell.failure is not None, (method, label)
 

@@ -15,7 +15,7 @@ def test_an_episode_as_a_rerun_recording_reads_back(tiny, tmp_path, capsys):
     root, _ = tiny
     out = root / "out"
     path = tmp_path / "drive.rrd"
-    args = ["view", str(out), "--setup", "k=6", "--method", "sift-vlad", "--images"]
+    args = ["view", str(out), "--setup", "k=6", "--method", "sift", "--images"]
     assert main([*args, "--out", str(path)]) == 0
     assert "failure drive" in capsys.readouterr().out  # failure drives first
     rows: dict[str, int] = {}
@@ -37,4 +37,4 @@ def test_an_episode_as_a_rerun_recording_reads_back(tiny, tmp_path, capsys):
     from vlocbench.bench.report import write_report
 
     page = write_report(out, examples=False).html.read_text()
-    assert f'<a href="../view/{row.key}.rrd">' in page and "failure drive, small, sift-vlad" in page
+    assert f'<a href="../view/{row.key}.rrd">' in page and "failure drive, small, sift" in page

@@ -26,7 +26,7 @@ def test_plugin_by_dotted_path_and_cache_reuse(gallery, tmp_path):
 def test_unknown_and_broken_methods():
     with pytest.raises(
         UnknownNameError,
-        match="aliked-lightglue, disk-lightglue, orb-teblid, sift, sift-prior, sift-vlad, xfeat-lighterglue",
+        match="aliked-lightglue, disk-lightglue, orb-teblid, sift, sift-gem, sift-prior, xfeat-lighterglue",
     ):
         method_conf("superpoint")
     with pytest.raises(UnknownNameError, match="dotted path"):
@@ -102,15 +102,22 @@ def test_retrieval_pairs_are_the_papers_top_k_with_the_image_itself(gallery):
     assert len(by_pose) > len(names) and by_pose != pairs
 
 
-def test_maps_are_keyed_by_gallery_method_and_configuration(gallery, tmp_path):
+def test_maps_are_keyed_by_gallery_and_configuration_not_by_method_name(gallery, tmp_path):
     from vlocbench.loc.mapping import MappingConfig, default_map_dir
 
     sift, orb = method_conf("sift"), method_conf("orb-teblid")
-    a = default_map_dir(tmp_path, gallery, "sift", sift, MappingConfig())
-    assert a == default_map_dir(tmp_path, gallery, "sift", sift, MappingConfig())
+    a = default_map_dir(tmp_path, gallery, sift, MappingConfig())
+    assert a == default_map_dir(tmp_path, gallery, sift, MappingConfig())
     assert a.parent.name == gallery.identity
-    assert a != default_map_dir(tmp_path, gallery, "orb-teblid", orb, MappingConfig())
-    assert a != default_map_dir(tmp_path, gallery, "sift", sift, MappingConfig(num_pairs=10))
+    assert a != default_map_dir(tmp_path, gallery, orb, MappingConfig())
+    assert a != default_map_dir(tmp_path, gallery, sift, MappingConfig(num_pairs=10))
+    assert a.name.startswith("sift-")
+    gem = method_conf("sift-gem")
+    assert default_map_dir(tmp_path, gallery, gem, MappingConfig()) not in (a, a.parent)
+    plugin = MethodConf("mypkg.feat:MyExtractor", "nn-ratio")
+    assert default_map_dir(tmp_path, gallery, plugin, MappingConfig()).name.startswith(
+        "mypkg_feat_MyExtractor-"
+    )
 
 
 def test_changing_a_presets_arguments_rekeys_its_maps(gallery, tmp_path, monkeypatch):
@@ -118,12 +125,12 @@ def test_changing_a_presets_arguments_rekeys_its_maps(gallery, tmp_path, monkeyp
     from vlocbench.loc.mapping import MappingConfig, default_map_dir
 
     sift = method_conf("sift")
-    before = default_map_dir(tmp_path, gallery, "sift", sift, MappingConfig())
+    before = default_map_dir(tmp_path, gallery, sift, MappingConfig())
     target, kwargs = registry.FEATURES["sift"]
     monkeypatch.setitem(registry.FEATURES, "sift", (target, {**kwargs, "peak_threshold": 0.02}))
-    assert default_map_dir(tmp_path, gallery, "sift", sift, MappingConfig()) != before
+    assert default_map_dir(tmp_path, gallery, sift, MappingConfig()) != before
     monkeypatch.setitem(registry.REVISIONS, "nn-ratio", registry.REVISIONS["nn-ratio"] + 1)
-    again = default_map_dir(tmp_path, gallery, "sift", sift, MappingConfig())
+    again = default_map_dir(tmp_path, gallery, sift, MappingConfig())
     assert again != before and again.parent == before.parent  # a new revision: a new map
 
 
@@ -132,12 +139,12 @@ def test_a_map_build_killed_mid_write_is_finished_by_a_rerun(gallery, tmp_path):
     from vlocbench.loc.registry import method_conf
 
     out = tmp_path / "map"
-    first = build_map(gallery, method_conf("sift-vlad"), out)
+    first = build_map(gallery, method_conf("sift"), out)
     (out / "map.json").rename(tmp_path / "map.json")  # killed before it finished
     for cache in ("features.h5", "matches.h5", "global.h5"):  # what a kill -9 mid-write leaves
         if (out / cache).exists():
             (out / cache).write_bytes(b"\x89HDF\r\n\x1a\n" + b"\0" * 64)
-    again = build_map(gallery, method_conf("sift-vlad"), out)
+    again = build_map(gallery, method_conf("sift"), out)
     assert again.points == first.points and again.images == first.images
     assert again.seconds != first.seconds  # built again, not read back
     # a finished map's folder keeps its caches to itself: another method is refused at once

@@ -6,7 +6,7 @@ import pytest
 from vlocbench.config import from_dict
 from vlocbench.errors import ConfigError
 from vlocbench.sim import Camera, Conditions, Exposure, Extrinsics, Intrinsics, Weather
-from vlocbench.sim.rain import PUDDLE_MAX_SHARE, apply_puddles, puddle_mask
+from vlocbench.sim.rain import PUDDLE_MAX_SHARE, apply_puddles, apply_rain, puddle_mask
 
 SKY_RGB = np.array([0.2, 0.3, 0.9])
 
@@ -85,3 +85,15 @@ def test_deposits_out_of_range_name_the_field():
     with pytest.raises(ConfigError, match=r"weather\.deposits.*\[0, 1\]"):
         from_dict(Conditions, {"weather": {"deposits": 1.5}})
     assert Weather(rain=0.8).puddles == 0.8 and Weather(rain=0.8, deposits=0.1).puddles == 0.1
+
+
+def test_the_streak_density_is_the_rains_knob():
+    """More streaks per 1000 pixels brighten more of the image; none leave the veil and noise."""
+    image = np.full((120, 160, 3), 60, np.uint8)
+    streaked = {
+        density: (apply_rain(image, 1.0, 0.5, density, np.random.default_rng(0)) > 110).mean()
+        for density in (0.0, 0.45, 1.5)
+    }
+    assert streaked[0.0] == 0.0 < streaked[0.45] < streaked[1.5]
+    with pytest.raises(ConfigError, match=r"weather\.rain_streaks_per_kpx: must be >= 0"):
+        Weather(rain=1.0, rain_streaks_per_kpx=-1)

@@ -289,7 +289,7 @@ class ExperimentPlan:
 
     def map_name(self, method: MethodSpec) -> str:
         """The folder of a method's map, under its gallery's."""
-        return map_name(method.name, method.conf, method.mapping or self.spec.mapping)
+        return map_name(method.conf, method.mapping or self.spec.mapping)
 
     def tasks(self) -> list[EpisodeTask]:
         """Every episode of the plan, once per key: setups that differ only in appearance share

@@ -72,12 +72,12 @@ def prepare_maps(
         for town in spec.towns:
             for method in (m for m in spec.methods if m.needs_map):
                 mapping = method.mapping or spec.mapping
-                map_dir = default_map_dir(
-                    cache / "maps", galleries[town], method.name, method.conf, mapping
-                )
+                map_dir = default_map_dir(cache / "maps", galleries[town], method.conf, mapping)
                 jobs[(town, method.name)] = (town, galleries[town], method, mapping, map_dir)
-        if workers > 1:
-            todo = [j for j in jobs.values() if not (j[-1] / MAP_FILE).exists()]
+        if workers > 1:  # one build per folder: methods that localize differently share a map
+            todo = list(
+                {j[-1]: j for j in jobs.values() if not (j[-1] / MAP_FILE).exists()}.values()
+            )
             _in_parallel(_map_job, todo, workers, bars, "maps")
         return {key: str(_map(*job, bars)) for key, job in jobs.items()}
     finally:

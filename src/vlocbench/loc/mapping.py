@@ -19,6 +19,7 @@ the same map waits, then finds it finished. A map is keyed by (gallery, method, 
 from __future__ import annotations
 
 import json
+import re
 import shutil
 import time
 from collections.abc import Callable, Iterator
@@ -88,17 +89,19 @@ class MapReport:
     seconds: dict[str, float] = field(default_factory=dict)
 
 
-def map_name(method: str, conf: MethodConf, mapping: MappingConfig) -> str:
-    """``METHOD-HASH``: a map's folder name, the hash of its configuration including the
-    arguments of the method's presets."""
-    return f"{method}-{config_hash((conf, mapping, stage_params(conf)), 8)}"
+def map_name(conf: MethodConf, mapping: MappingConfig) -> str:
+    """``FEATURES-HASH``: a map's folder name, its local features (a plugin's dotted path made a
+    plain name) and the hash of what builds it: the method's stages with their presets'
+    arguments and the mapping settings. Methods that differ only in how they localize share it."""
+    features = re.sub(r"[^A-Za-z0-9_-]+", "_", conf.features).strip("_")
+    return f"{features}-{config_hash((conf, mapping, stage_params(conf)), 8)}"
 
 
 def default_map_dir(
-    root: str | Path, gallery: Gallery, method: str, conf: MethodConf, mapping: MappingConfig
+    root: str | Path, gallery: Gallery, conf: MethodConf, mapping: MappingConfig
 ) -> Path:
-    """``root/GALLERY-ID/METHOD-HASH``: one folder per (gallery, method, configuration)."""
-    return Path(root) / gallery.identity / map_name(method, conf, mapping)
+    """``root/GALLERY-ID/FEATURES-HASH``: one folder per (gallery, map configuration)."""
+    return Path(root) / gallery.identity / map_name(conf, mapping)
 
 
 # -- HDF5 caches ---------------------------------------------------------------------------------

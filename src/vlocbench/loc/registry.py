@@ -69,8 +69,10 @@ class MethodConf:
 
 
 METHODS: dict[str, MethodConf] = {
-    "sift": MethodConf("sift", "nn-ratio", "effnet-gem"),
-    "sift-vlad": MethodConf("sift", "nn-ratio", "vlad"),  # no PyTorch at all
+    # the paper's SIFT; VLAD over its own descriptors stands in for NetVLAD / AP-GeM (no PyTorch)
+    "sift": MethodConf("sift", "nn-ratio", "vlad"),
+    # the stand-in before December 2026: ImageNet's EfficientNet-Lite0 with GeM pooling
+    "sift-gem": MethodConf("sift", "nn-ratio", "effnet-gem"),
     # sequential localization: the gallery images nearest to the EKF's pose, no global descriptor
     "sift-prior": MethodConf("sift", "nn-ratio", POSE_PRIOR),
     "orb-teblid": MethodConf("orb-teblid", "nn-hamming", "vlad"),

@@ -12,7 +12,7 @@ from typing import Literal
 
 import numpy as np
 
-from vlocbench.config import ADDED_OPTION, require, require_one_of
+from vlocbench.config import ADDED_OPTION, default_changed, require, require_one_of
 from vlocbench.errors import UnknownNameError
 
 Season = Literal["summer", "autumn", "winter"]
@@ -73,6 +73,13 @@ class Weather:
     deposits: float | None = field(default=None, metadata=ADDED_OPTION)
     fog_model: FogModel = "starts_at"
     fog_ramp_m: float = 5.0  # starts_at: from clear at v to opaque at v + fog_ramp_m
+    # rain streaks the camera sees at rain 1 (CARLA's precipitation 100), per 1000 pixels: the one
+    # parameter of the weather fitted on the paper, on sift's F at 90 m in town10
+    # (docs/calibration.md; experiments/calibration/rain.yaml); 0.45 until the fit was made again
+    # with VLAD retrieval (2026-12-04), kept out of the keys there and wherever it does not rain
+    rain_streaks_per_kpx: float = field(
+        default=0.65, metadata=default_changed(0.45, only_with="rain")
+    )
 
     def __post_init__(self) -> None:
         require_one_of(self.fog_model, ("starts_at", "exponential"), "weather.fog_model")
@@ -83,6 +90,11 @@ class Weather:
                 "weather.fog_visual_range_m",
                 f"must be > 0 m (or null for no fog), got {self.fog_visual_range_m:g}",
             )
+        require(
+            self.rain_streaks_per_kpx >= 0,
+            "weather.rain_streaks_per_kpx",
+            f"must be >= 0, got {self.rain_streaks_per_kpx:g}",
+        )
         for name in ("rain", "overcast"):
             v = getattr(self, name)
             require(0 <= v <= 1, f"weather.{name}", f"must be in [0, 1], got {v:g}")
@@ -207,8 +219,9 @@ class Exposure:
     vlocbench's earlier night, a bright image paid for in shot noise (docs/fidelity.md)."""
 
     mode: Literal["auto", "fixed"] = "auto"
-    # 7 stops: fitted on town01's SIFT T1 recall at k = 8 (docs/calibration.md)
-    max_gain: float = 128.0
+    # 6.8 stops: fitted on town01's SIFT T1 recall at k = 8 (docs/calibration.md); 128 until the
+    # fit was made again with VLAD retrieval (2026-12-04), kept out of the keys there
+    max_gain: float = field(default=112.0, metadata=default_changed(128.0))
     shot_noise: float = 0.0
     read_noise: float = 0.0
 

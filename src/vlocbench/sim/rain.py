@@ -14,10 +14,6 @@ from numpy.typing import NDArray
 
 from vlocbench.interfaces import Array, Image
 
-# rain streaks the camera sees at rain 1 (CARLA's precipitation 100), per 1000 pixels: the one
-# parameter of the weather fitted on the paper, on sift's F at 90 m in town10 (docs/calibration.md;
-# 1.2, vlocbench's rain until December 2026, crashed SIFT twice as often as the paper's)
-STREAKS_PER_KPX = 0.45
 PUDDLE_CELL_M = 2.5  # the size of the noise's features: puddles a few metres across
 PUDDLE_MAX_SHARE = 0.5  # of the road under water at deposits 1 (CARLA's precipitation_deposits 100)
 PUDDLE_MAX_Z_M = 0.03  # puddles lie on the road (z = 0), not on sidewalks and kerbs
@@ -25,8 +21,15 @@ _MARCH_T_M = np.geomspace(0.3, 150.0, 20)  # samples along a reflected ray (m)
 _MARCH_STEP_M = np.diff(_MARCH_T_M, prepend=0.0).astype(np.float32)  # from the sample before
 
 
-def apply_rain(image: Image, amount: float, brightness: float, rng: np.random.Generator) -> Image:
-    """Rain of strength ``amount`` in [0, 1] on an (H, W, 3) image; ``brightness`` in [0, 1] of the sky."""
+def apply_rain(
+    image: Image,
+    amount: float,
+    brightness: float,
+    streaks_per_kpx: float,
+    rng: np.random.Generator,
+) -> Image:
+    """Rain of strength ``amount`` in [0, 1] on an (H, W, 3) image; ``brightness`` in [0, 1] of the
+    sky; ``streaks_per_kpx`` streaks per 1000 pixels at ``amount`` 1."""
     if amount <= 0:
         return image
     h, w = image.shape[:2]
@@ -36,7 +39,7 @@ def apply_rain(image: Image, amount: float, brightness: float, rng: np.random.Ge
     out = out * (1 - 0.25 * amount) + veil * 0.25 * amount
     # streaks: short slanted bright lines, blurred along their direction
     layer = np.zeros((h, w), np.float32)
-    n = int(amount * STREAKS_PER_KPX * h * w / 1000)
+    n = int(amount * streaks_per_kpx * h * w / 1000)
     xs, ys = rng.integers(0, w, n), rng.integers(0, h, n)
     lengths = rng.integers(h // 40, h // 12, n)
     slant = rng.normal(0.15, 0.03)

@@ -308,7 +308,13 @@ class Renderer:
                 np.random.default_rng(seed + 2),
             )
         if rain > 0:
-            image = apply_rain(image, rain, self.sky_brightness, np.random.default_rng(seed))
+            image = apply_rain(
+                image,
+                rain,
+                self.sky_brightness,
+                self.conditions.weather.rain_streaks_per_kpx,
+                np.random.default_rng(seed),
+            )
         e = self.conditions.exposure
         return sensor_noise(
             image, self.gain, e.shot_noise, e.read_noise, np.random.default_rng(seed + 1)
