@@ -16,7 +16,8 @@ that recall falls with k as the paper's does.
 ``--retrieval pose-prior`` retrieves the map images nearest to the true pose instead of asking the
 map's retrieval: the local features alone, to tell their misses from the retrieval's.
 ``--experiment FILE`` takes ``--town`` and ``--method`` with their settings (gallery, mapping,
-localizer) from an experiment, so the maps are that experiment's. ``--shadows``: the sun casts
+localizer) from an experiment, so the maps are that experiment's; a preset method the experiment
+does not name runs on its gallery and mapping. ``--shadows``: the sun casts
 shadows in the gallery (its own gallery and maps) and in the queries. ``--viewpoint`` sweeps the
 query camera's (raise m, pitch down deg) levels instead, at the first ``--k`` (the paper's Table 3
 has no recall to print beside). ``--setups FILE`` sweeps the conditions of that experiment's setups
@@ -34,6 +35,7 @@ import numpy as np
 
 from vlocbench.bench.experiment import load_experiment, resolve
 from vlocbench.bench.localizer import LocalizationQuery
+from vlocbench.bench.methods import MethodSpec
 from vlocbench.bench.metrics import confident_wrong, place_recall, recall
 from vlocbench.bench.paper import paper_results
 from vlocbench.bench.preparation import prepare_maps
@@ -73,6 +75,8 @@ def main() -> None:
     args = ap.parse_args()
     if args.experiment:  # its gallery, mapping and method settings: the maps it built
         plan = load_experiment(args.experiment)
+        if args.method not in {m.name for m in plan.spec.methods}:  # a preset on its gallery
+            plan = resolve(dataclasses.replace(plan.spec, methods=(MethodSpec(args.method),)))
     else:
         plan = load_experiment(
             {
