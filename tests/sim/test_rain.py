@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from vlocbench.config import from_dict
+from vlocbench.config import from_dict, to_dict
 from vlocbench.errors import ConfigError
 from vlocbench.sim import Camera, Conditions, Exposure, Extrinsics, Intrinsics, Weather
 from vlocbench.sim.rain import PUDDLE_MAX_SHARE, apply_puddles, apply_rain, puddle_mask
@@ -97,3 +97,16 @@ def test_the_streak_density_is_the_rains_knob():
     assert streaked[0.0] == 0.0 < streaked[0.45] < streaked[1.5]
     with pytest.raises(ConfigError, match=r"weather\.rain_streaks_per_kpx: must be >= 0"):
         Weather(rain=1.0, rain_streaks_per_kpx=-1)
+
+
+def test_the_streak_density_keys_only_rainy_results():
+    """Dry conditions keep their keys whatever the density; rain at the density fitted before
+    (0.45) keeps its stored keys; rain at today's default gets new ones."""
+    from vlocbench.config import config_hash
+
+    assert config_hash(Weather(rain_streaks_per_kpx=2.0)) == config_hash(Weather())
+    before = to_dict(Weather(rain=1.0))
+    del before["rain_streaks_per_kpx"]
+    del before["deposits"]  # an option added later, left out at its default
+    assert config_hash(Weather(rain=1.0, rain_streaks_per_kpx=0.45)) == config_hash(before)
+    assert config_hash(Weather(rain=1.0)) != config_hash(before)
