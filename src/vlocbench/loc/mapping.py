@@ -12,8 +12,9 @@ missing (or with ``overwrite``):
                   holds a finished map, which ``build_map`` returns as it is
 
 One process builds a map folder at a time (:func:`vlocbench.locks.building`); another that asks for
-the same map waits, then finds it finished. A map is keyed by (gallery, method, configuration):
-:func:`default_map_dir` names its folder so.
+the same map waits, then finds it finished. A map is keyed by (gallery, what builds it: the
+method's stages and the mapping settings, not the method's name): :func:`default_map_dir` names
+its folder so.
 """
 
 from __future__ import annotations
