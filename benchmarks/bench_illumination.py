@@ -21,8 +21,9 @@ does not name runs on its gallery and mapping. ``--shadows``: the sun casts
 shadows in the gallery (its own gallery and maps) and in the queries. ``--viewpoint`` sweeps the
 query camera's (raise m, pitch down deg) levels instead, at the first ``--k`` (the paper's Table 3
 has no recall to print beside). ``--setups FILE`` sweeps the conditions of that experiment's setups
-(``experiments/paper/weather.yaml``: the paper's fog and rain) with any method's map. ``--per-query`` prints each query's position error, PnP inliers and
-how many of its 5 retrieved images lie within 10 m.
+(``experiments/paper/weather.yaml``: the paper's fog and rain) with any method's map.
+``--per-query`` prints each query's position error, PnP inliers and how many of its 5 retrieved
+images lie within 10 m.
 """
 
 from __future__ import annotations
