@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from vlocbench.bench.experiment import load_experiment, resolve
+from vlocbench.bench.experiment import ExperimentPlan, load_experiment, resolve
 from vlocbench.bench.localizer import LocalizationQuery
 from vlocbench.bench.methods import MethodSpec
 from vlocbench.bench.metrics import confident_wrong, place_recall, recall
@@ -44,9 +44,40 @@ from vlocbench.bench.towns import route_named, town_named
 from vlocbench.bench.visual import VisualLocalizer
 from vlocbench.geometry import planar_pose, pose_error
 from vlocbench.loc.localizer import RETRIEVAL_SOURCES
+from vlocbench.nav import WaypointPath
 from vlocbench.sim import Conditions, Exposure, Illumination, Simulator, Viewpoint
 
 STAGES = ("features", "retrieval", "matching", "pnp")
+
+
+def method_plan(experiment: Path | None, town: str, method: str) -> ExperimentPlan:
+    """The plan of one town and method: ``experiment``'s (its gallery, mapping and method
+    settings: the maps it built; a preset it does not name runs on its gallery), or the
+    defaults'."""
+    if experiment:
+        plan = load_experiment(experiment)
+        if method not in {m.name for m in plan.spec.methods}:
+            plan = resolve(dataclasses.replace(plan.spec, methods=(MethodSpec(method),)))
+    else:
+        plan = load_experiment(
+            {
+                "name": "bench_illumination",
+                "towns": [town],
+                "methods": [method],
+                "failure": False,
+                "baseline": False,
+            }
+        )
+    return plan.only([town], [method])
+
+
+def route_queries(route: WaypointPath, count: int) -> tuple[np.ndarray, np.ndarray]:
+    """``count`` query places along ``route``, half-way between gallery images (every 2 m):
+    positions (count, 2) in metres and headings (count,) in radians."""
+    s = np.linspace(10.0, route.length_m - 10.0, count)
+    s = np.round(s / 2.0) * 2.0 + 1.0
+    xy = np.stack([np.interp(s, route.s_m, route.xy[:, i]) for i in (0, 1)], 1)
+    return xy, np.interp(s, route.s_m, np.unwrap(route.yaw_rad))
 
 
 def main() -> None:
@@ -74,21 +105,7 @@ def main() -> None:
         help="each query's position error, PnP inliers and retrieved images within 10 m",
     )
     args = ap.parse_args()
-    if args.experiment:  # its gallery, mapping and method settings: the maps it built
-        plan = load_experiment(args.experiment)
-        if args.method not in {m.name for m in plan.spec.methods}:  # a preset on its gallery
-            plan = resolve(dataclasses.replace(plan.spec, methods=(MethodSpec(args.method),)))
-    else:
-        plan = load_experiment(
-            {
-                "name": "bench_illumination",
-                "towns": [args.town],
-                "methods": [args.method],
-                "failure": False,
-                "baseline": False,
-            }
-        )
-    plan = plan.only([args.town], [args.method])
+    plan = method_plan(args.experiment, args.town, args.method)
     if args.shadows:  # the gallery too: its own gallery and maps
         g = plan.spec.gallery
         shaded = dataclasses.replace(g, conditions=dataclasses.replace(g.conditions, shadows=True))
@@ -101,12 +118,7 @@ def main() -> None:
     exposure = Exposure(
         max_gain=args.max_gain, shot_noise=args.shot_noise, read_noise=args.read_noise
     )
-    # half-way between gallery images (every 2 m), spread over the whole route
-    s = np.linspace(10.0, route.length_m - 10.0, args.queries)
-    s = np.round(s / 2.0) * 2.0 + 1.0
-    xy = np.stack([np.interp(s, route.s_m, route.xy[:, i]) for i in (0, 1)], 1)
-    yaw = np.unwrap(route.yaw_rad)
-    yaws = np.interp(s, route.s_m, yaw)
+    xy, yaws = route_queries(route, args.queries)
     paper = paper_results().tables["illumination"]
     t1_paper = {m: dict(zip(paper.recall_levels, v)) for m, v in paper.recall_t1[args.town].items()}
     print(

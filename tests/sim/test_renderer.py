@@ -8,6 +8,7 @@ import pytest
 
 from vlocbench.errors import ConfigError, UnknownNameError
 from vlocbench.geometry import invert_pose, planar_pose
+from vlocbench.loc.registry import build_features
 from vlocbench.sim import (
     Camera,
     Conditions,
@@ -267,17 +268,19 @@ def test_ego_car_is_not_seen_by_its_cameras(small_sim):
     assert (render(small_sim, Conditions(), chase).image == hidden).all()
 
 
-def test_sift_finds_enough_keypoints_on_town01_gallery_images():
+def test_the_papers_sift_finds_enough_keypoints_on_town01_gallery_images():
+    """About 300 a view since the sidewalks lost their grout lines (600 with them, half of them
+    on the lines' look-alike crossings)."""
     town = generate_town(load_town_spec("town01"))
-    sift = cv2.SIFT_create()
+    sift = build_features("sift")
     counts = []
     with Simulator(town) as sim:
         for idx in np.linspace(10, len(town.route.waypoints_xy) - 10, 9).astype(int):
             x, y = town.route.waypoints_xy[idx]
             sim.teleport(float(x), float(y), float(town.route.yaw_rad[idx]))
             image = sim.render([gallery_camera()])[0].image
-            counts.append(len(sift.detect(cv2.cvtColor(image, cv2.COLOR_RGB2GRAY))))
-    assert np.median(counts) >= 500, counts
+            counts.append(len(sift.extract(image)))
+    assert np.median(counts) >= 250, counts
 
 
 def test_beyond_its_range_the_camera_records_the_share_of_exposure_it_reached(small_sim):
@@ -309,3 +312,20 @@ def test_an_aliased_camera_sees_the_same_scene_with_harder_edges(small_sim):
     # what changed lies on edges: next to a strong gradient of the smooth image
     edges = cv2.dilate(cv2.Canny(smooth.astype(np.uint8), 50, 150), np.ones((3, 3), np.uint8))
     assert (edges[changed] > 0).mean() > 0.9
+
+
+def test_depth_is_the_distance_along_the_optical_axis_to_the_scene(small_sim):
+    """Looking straight down on the road from 12 m: every road pixel is 12 m away along the
+    axis, and the sky straight up is at the far plane."""
+    small_sim.set_conditions(Conditions())
+    wp = small_sim.town.route.waypoints_xy[5]
+    down = np.eye(4)
+    down[:3, :3] = np.diag([1.0, -1.0, -1.0])  # optical axis -z (down), image y along -y
+    down[:3, 3] = [wp[0], wp[1], 12.0]
+    depth = small_sim.renderer.render_depth(down, 64, 48, 30.0)
+    assert depth.shape == (48, 64) and depth.dtype == np.float32
+    assert np.allclose(np.median(depth), 12.0, atol=0.05)
+    up = down.copy()
+    up[:3, :3] = np.diag([1.0, 1.0, 1.0])  # optical axis +z
+    up[2, 3] = 200.0  # above every roof
+    assert np.all(small_sim.renderer.render_depth(up, 64, 48, 30.0) > 1000)

@@ -293,13 +293,9 @@ class Renderer:
         seed = zlib.crc32(f"{sc.town.spec.seed}:{frame_id}".encode())
         deposits = self.conditions.weather.puddles
         if deposits > 0:
-            depth = np.empty((height, width), np.float32)
-            mujoco.mjr_readPixels(None, depth, r._rect, r._mjr_context)
-            # reversed z, as MuJoCo's renderer keeps it: 1 at the near plane, 0 at the far one
-            depth_m = FAR_M * NEAR_M / ((FAR_M - NEAR_M) * np.flipud(depth) + NEAR_M)
             image = apply_puddles(
                 image,
-                depth_m.astype(np.float32, copy=False),
+                _depth_m(r, width, height),
                 Intrinsics(width, height, fov_deg).K,
                 world_from_cam,
                 deposits,
@@ -319,6 +315,15 @@ class Renderer:
         return sensor_noise(
             image, self.gain, e.shot_noise, e.read_noise, np.random.default_rng(seed + 1)
         )
+
+    def render_depth(
+        self, world_from_cam: NDArray[np.float64], width: int, height: int, fov_deg: float
+    ) -> NDArray[np.float32]:
+        """(height, width) depth in metres along the optical axis of the view ``render`` draws
+        from the optical-frame pose ``world_from_cam``: the scene's true geometry, e.g. to check a
+        map's 3D points. The sky is at the far plane, ``FAR_M``."""
+        self.render(world_from_cam, width, height, fov_deg)
+        return _depth_m(self._renderer(width, height, 0), width, height)
 
     def _cast_sun_shadows(self, scene: mujoco.MjvScene, aim_world: NDArray[np.float64]) -> None:
         """The sun casts shadows in a square around ``aim_world`` (3,). MuJoCo draws a
@@ -388,6 +393,14 @@ class Renderer:
         for r in self._renderers.values():
             r.close()
         self._renderers.clear()
+
+
+def _depth_m(r: mujoco.Renderer, width: int, height: int) -> NDArray[np.float32]:
+    """(height, width) depth in metres along the optical axis of ``r``'s last render."""
+    depth = np.empty((height, width), np.float32)
+    mujoco.mjr_readPixels(None, depth, r._rect, r._mjr_context)
+    # reversed z, as MuJoCo's renderer keeps it: 1 at the near plane, 0 at the far one
+    return (FAR_M * NEAR_M / ((FAR_M - NEAR_M) * np.flipud(depth) + NEAR_M)).astype(np.float32)
 
 
 def _horizontal(direction: NDArray[np.float64]) -> NDArray[np.float64]:

@@ -32,7 +32,7 @@ NIGHT_PARKED_Z_M = -1000.0
 LAMP_HEIGHT_M = 6.2  # the underside of a lamp's head, where its light leaves
 LAMP_REACH_M = 1.7  # from the pole to the head, towards the road
 # bump when the look of the towns changes: galleries and maps (and results) are keyed by it
-SCENE_VERSION = 5
+SCENE_VERSION = 6  # 6: sidewalks without grout lines
 GROUND_FLOOR_M = 4.2
 SHOP_ATLAS_COLUMNS = 8
 SKY_SIZE = 64

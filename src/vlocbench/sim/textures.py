@@ -376,7 +376,11 @@ def paving(rng: np.random.Generator, snow: float = 0.0) -> Image:
 
     Every slab has its own shade and few, faint spots: a short-period, high-contrast pattern
     would be the same everywhere in town, and a localizer would match the ground of one street
-    to the ground of another.
+    to the ground of another. No grout lines: their crossings, a dark cross on light stone every
+    0.5 m, all look alike, and a map matched one crossing to another along the cameras' epipolar
+    lines (a right-facing camera's run along the rows of slabs) and triangulated them into ghost
+    points far from the sidewalk: 29 % of town01's map points, which cost `sift` 7 points of
+    T1 recall at noon (docs/reproduction.md).
     """
     px_per_m = 64
     size = round(PAVING_TILE_M * px_per_m)
@@ -390,9 +394,6 @@ def paving(rng: np.random.Generator, snow: float = 0.0) -> Image:
         x, y = rng.integers(0, size, 2)
         shade = (base * rng.uniform(0.6, 1.15),) * 3
         cv2.circle(img, (int(x), int(y)), int(rng.integers(1, 4)), _rgb(shade), -1)
-    for k in range(0, size, slab):
-        cv2.line(img, (k, 0), (k, size), (140, 135, 130), 2)
-        cv2.line(img, (0, k), (size, k), (140, 135, 130), 2)
     return _snow(_finish(img, rng), rng, snow)
 
 
