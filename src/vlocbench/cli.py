@@ -123,8 +123,6 @@ def _visual_localizer(map_dir: Path | None) -> VisualLocalizer:
     """The map's localizer on a camera like the one that took its gallery (right-facing mount)."""
     import json
 
-    import numpy as np
-
     from vlocbench.bench.visual import VisualLocalizer
     from vlocbench.loc.gallery import Gallery
     from vlocbench.sim import Camera, Extrinsics, Intrinsics
@@ -136,8 +134,7 @@ def _visual_localizer(map_dir: Path | None) -> VisualLocalizer:
         raise VlocbenchError(f"--map: {map_dir} is not a map (no map.json)")
     gallery = Gallery.load(json.loads(info.read_text())["gallery"])
     model = next(iter(gallery.cameras.values()))
-    fov = float(np.degrees(2 * np.arctan(model.width / 2 / model.K[0, 0])))
-    camera = Camera("gallery", Intrinsics(model.width, model.height, fov), Extrinsics())
+    camera = Camera("gallery", Intrinsics(model.width, model.height, model.fov_deg), Extrinsics())
     return VisualLocalizer(map_dir, (camera,))
 
 

@@ -56,8 +56,7 @@ def check_points(
     for image in reconstruction.images.values():
         entry = entries[image.name]
         cam = gallery.cameras[entry.camera]
-        fov_deg = float(np.degrees(2 * np.arctan(cam.width / (2 * cam.K[0, 0]))))
-        depth = renderer.render_depth(entry.world_from_cam, cam.width, cam.height, fov_deg)
+        depth = renderer.render_depth(entry.world_from_cam, cam.width, cam.height, cam.fov_deg)
         cam_from_world = invert_pose(entry.world_from_cam)
         for p2 in image.points2D:
             if not p2.has_point3D():

@@ -39,6 +39,11 @@ class CameraModel:
     height: int
     K: Array
 
+    @property
+    def fov_deg(self) -> float:
+        """The horizontal field of view of a pinhole camera centred on its image, in degrees."""
+        return float(np.degrees(2 * np.arctan(self.width / (2 * self.K[0, 0]))))
+
     def to_json(self) -> dict:
         return {"width": self.width, "height": self.height, "K": np.asarray(self.K).tolist()}
 

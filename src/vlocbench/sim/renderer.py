@@ -264,6 +264,48 @@ class Renderer:
         ``frame_id`` seeds per-frame effects (rain). ``markers_world`` (N, 3) draws unlit red
         spheres, e.g. to check projections. ``antialias``: 4 samples per pixel, else 1.
         """
+        r, image = self._draw(
+            world_from_cam, width, height, fov_deg, antialias, markers_world, marker_radius_m
+        )
+        rain = self.conditions.weather.rain
+        seed = zlib.crc32(f"{self.scene.town.spec.seed}:{frame_id}".encode())
+        deposits = self.conditions.weather.puddles
+        if deposits > 0:
+            image = apply_puddles(
+                image,
+                _depth_m(r, width, height),
+                Intrinsics(width, height, fov_deg).K,
+                world_from_cam,
+                deposits,
+                self.scene.town.spec.seed,
+                self._sky_horizon,
+                np.random.default_rng(seed + 2),
+            )
+        if rain > 0:
+            image = apply_rain(
+                image,
+                rain,
+                self.sky_brightness,
+                self.conditions.weather.rain_streaks_per_kpx,
+                np.random.default_rng(seed),
+            )
+        e = self.conditions.exposure
+        return sensor_noise(
+            image, self.gain, e.shot_noise, e.read_noise, np.random.default_rng(seed + 1)
+        )
+
+    def _draw(
+        self,
+        world_from_cam: NDArray[np.float64],
+        width: int,
+        height: int,
+        fov_deg: float,
+        antialias: bool = False,
+        markers_world: NDArray[np.float64] | None = None,
+        marker_radius_m: float = 0.1,
+    ) -> tuple[mujoco.Renderer, Image]:
+        """The scene drawn from ``world_from_cam``, before any image effect: the renderer (whose
+        depth buffer holds the view) and its RGB image (height, width, 3)."""
         sc = self.scene
         r = self._renderer(width, height, ANTIALIAS_SAMPLES if antialias else 0)
         r.update_scene(sc.data, camera=-1, scene_option=self.option)
@@ -288,33 +330,7 @@ class Renderer:
         if markers_world is not None:
             self._add_markers(r.scene, markers_world, marker_radius_m, (1.0, 0.0, 0.0))
         self._set_fog(r)
-        image = r.render()
-        rain = self.conditions.weather.rain
-        seed = zlib.crc32(f"{sc.town.spec.seed}:{frame_id}".encode())
-        deposits = self.conditions.weather.puddles
-        if deposits > 0:
-            image = apply_puddles(
-                image,
-                _depth_m(r, width, height),
-                Intrinsics(width, height, fov_deg).K,
-                world_from_cam,
-                deposits,
-                sc.town.spec.seed,
-                self._sky_horizon,
-                np.random.default_rng(seed + 2),
-            )
-        if rain > 0:
-            image = apply_rain(
-                image,
-                rain,
-                self.sky_brightness,
-                self.conditions.weather.rain_streaks_per_kpx,
-                np.random.default_rng(seed),
-            )
-        e = self.conditions.exposure
-        return sensor_noise(
-            image, self.gain, e.shot_noise, e.read_noise, np.random.default_rng(seed + 1)
-        )
+        return r, r.render()
 
     def render_depth(
         self, world_from_cam: NDArray[np.float64], width: int, height: int, fov_deg: float
@@ -322,8 +338,8 @@ class Renderer:
         """(height, width) depth in metres along the optical axis of the view ``render`` draws
         from the optical-frame pose ``world_from_cam``: the scene's true geometry, e.g. to check a
         map's 3D points. The sky is at the far plane, ``FAR_M``."""
-        self.render(world_from_cam, width, height, fov_deg)
-        return _depth_m(self._renderer(width, height, 0), width, height)
+        r, _ = self._draw(world_from_cam, width, height, fov_deg)
+        return _depth_m(r, width, height)
 
     def _cast_sun_shadows(self, scene: mujoco.MjvScene, aim_world: NDArray[np.float64]) -> None:
         """The sun casts shadows in a square around ``aim_world`` (3,). MuJoCo draws a

@@ -379,8 +379,8 @@ def paving(rng: np.random.Generator, snow: float = 0.0) -> Image:
     to the ground of another. No grout lines: their crossings, a dark cross on light stone every
     0.5 m, all look alike, and a map matched one crossing to another along the cameras' epipolar
     lines (a right-facing camera's run along the rows of slabs) and triangulated them into ghost
-    points far from the sidewalk: 29 % of town01's map points, which cost `sift` 7 points of
-    T1 recall at noon (docs/reproduction.md).
+    points off every surface: 36 % of town01's map points, which cost `sift` 5 points of T1
+    recall at noon (docs/reproduction.md).
     """
     px_per_m = 64
     size = round(PAVING_TILE_M * px_per_m)
