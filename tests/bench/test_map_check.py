@@ -4,8 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 import pycolmap
+import pytest
 
 from vlocbench.bench.map_check import PLACES, check_points
+from vlocbench.errors import LocalizationError
+from vlocbench.loc.gallery import Gallery
 from vlocbench.loc.mapping import map_info
 
 
@@ -33,3 +36,10 @@ def test_points_are_placed_on_behind_or_in_front_of_the_surfaces_their_cameras_s
         moved[pid] = "behind" if scale > 1 else "in front"
     places = check_points(rec, gallery, small_sim.renderer).places()
     assert {pid: places[pid] for pid in moved} == moved
+
+
+def test_a_map_checked_against_another_gallery_is_a_clear_error(gallery, sift_map, small_sim):
+    rec = pycolmap.Reconstruction(sift_map[0] / "sfm")
+    other = Gallery(gallery.root, gallery.cameras, gallery.images[:-1])
+    with pytest.raises(LocalizationError, match="not in the gallery"):
+        check_points(rec, other, small_sim.renderer)

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 import pycolmap
 
+from vlocbench.errors import LocalizationError
 from vlocbench.geometry import invert_pose
 from vlocbench.loc.gallery import Gallery
 from vlocbench.sim.renderer import Renderer
@@ -53,6 +54,12 @@ def check_points(
     at the poses of ``gallery``'s images (the map's gallery): one depth render per image."""
     seen: dict[int, list[tuple[float, float]]] = defaultdict(list)
     entries = {im.name: im for im in gallery.images}
+    missing = sorted(im.name for im in reconstruction.images.values() if im.name not in entries)
+    if missing:
+        raise LocalizationError(
+            f"the map's images {missing[:3]} ({len(missing)} in all) are not in the gallery at "
+            f"{gallery.root}: check a map against the gallery it was built from"
+        )
     for image in reconstruction.images.values():
         entry = entries[image.name]
         cam = gallery.cameras[entry.camera]
