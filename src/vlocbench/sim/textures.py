@@ -86,9 +86,13 @@ class FacadeTile:
     variants: int = 1
     # the window of every cell as shares of the cell: left, top, right, bottom (from its top-left)
     window: tuple[float, float, float, float] | None = None
+    recess_m: float = 0.0  # how far the window sits behind the wall's face (0: a flat wall)
 
 
 FACADE_VARIANTS = 12  # window cells per facade style; every wall draws its own sequence of them
+# masonry windows sit this far behind the wall's face (glass curtain walls are flat): CARLA's
+# facades have such relief, and a flat wall leaves PnP two poses as good as each other
+WINDOW_RECESS_M = 0.2
 
 
 @dataclass(frozen=True)
@@ -159,7 +163,8 @@ def facade(
     cells = [_facade_cell(look, rng) for _ in range(variants)]
     x0, y0, x1, y1 = window
     share = (x0 / w, y0 / h, x1 / w, y1 / h)
-    return FacadeTile(atlas(cells, variants), bay_m, floor_height_m, variants, share)
+    recess_m = 0.0 if family == 4 else WINDOW_RECESS_M
+    return FacadeTile(atlas(cells, variants), bay_m, floor_height_m, variants, share, recess_m)
 
 
 def _facade_cell(look: _FacadeStyle, rng: np.random.Generator) -> Image:
@@ -220,6 +225,12 @@ def _wall_pattern(img: NDArray, family: int, base: NDArray, rng: np.random.Gener
             cv2.line(img, (0, y), (w, y), _rgb(base * 0.75), 2)
         for x in range(0, w, w // cols):
             cv2.line(img, (x, 0), (x, h), _rgb(base * 0.78), 2)
+    if family == 3:
+        # exposed aggregate, a blotchy grain of a few centimetres: smooth panels in the shade gave
+        # the paper's SIFT 35-80 keypoints a view where other walls give 200-450 (105-180 with
+        # the grain), and town01's noon failures sat in front of them
+        # (drawn from a spawned generator: every other texture of the town stays as it was)
+        img += noise((h, w), rng.spawn(1)[0], 4, 40)[..., None]
 
 
 def _window(
@@ -368,11 +379,12 @@ def crosswalk_tile(rng: np.random.Generator) -> Image:
     return _finish(img, rng, 4)
 
 
-PAVING_TILE_M = 16.0  # the paving texture repeats only every 16 m
+PAVING_TILE_M = 16.0  # the paving texture's tile (the scene lays it in shifted blocks)
+PAVING_SLAB_M = 0.5
 
 
 def paving(rng: np.random.Generator, snow: float = 0.0) -> Image:
-    """Sidewalk slabs of 0.5 m over a 16 m x 16 m tile, optionally covered by snow in [0, 1].
+    """Sidewalk slabs of ``PAVING_SLAB_M`` over a 16 m x 16 m tile, optionally covered by snow in [0, 1].
 
     Every slab has its own shade and few, faint spots: a short-period, high-contrast pattern
     would be the same everywhere in town, and a localizer would match the ground of one street
@@ -387,7 +399,7 @@ def paving(rng: np.random.Generator, snow: float = 0.0) -> Image:
     base = rng.uniform(165, 195)
     img = np.ones((size, size, 3), np.float32) * np.array([base, base * 0.97, base * 0.92])
     img += noise((size, size), rng, 24, 8)[..., None]
-    slab = px_per_m // 2
+    slab = round(PAVING_SLAB_M * px_per_m)
     shades = rng.uniform(0.9, 1.08, (size // slab, size // slab))
     img *= np.kron(shades, np.ones((slab, slab)))[..., None]
     for _ in range(400):  # pebbles and chewing gum

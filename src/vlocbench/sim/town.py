@@ -191,7 +191,7 @@ class Building:
     floors: int
     facade: int  # facade style index
     tint: int  # colour variant of the style
-    shop: int  # ground-floor shop style, -1 for none
+    shop: bool  # shops on the ground floor of its front (the scene chooses their tiles)
     front: str
     tower: bool = False
 
@@ -352,11 +352,11 @@ class _Builder:
         height = floors * bs.floor_height_m + 0.6  # parapet
         n_styles = bs.facade_styles
         facade = int(self.rng.integers(0, n_styles))
-        shop = (
-            int(self.rng.integers(0, bs.shop_styles))
-            if self.rng.random() < bs.shop_probability
-            else -1
-        )
+        shop = bool(self.rng.random() < bs.shop_probability)
+        if shop:
+            # scene 6 took its tile from this draw; the scene plans the tiles now (apart, across
+            # the town), and the draw stays so that every later draw of a town stays where it was
+            self.rng.integers(0, bs.shop_styles)
         self.buildings.append(
             Building(rect, height, floors, facade, int(self.rng.integers(0, 3)), shop, front, tower)
         )
