@@ -3,7 +3,13 @@
 import numpy as np
 
 from vlocbench.sim import generate_town, load_town_spec
-from vlocbench.sim.scene import GROUND_FLOOR_M, building_side, shop_bays, shop_plan
+from vlocbench.sim.scene import (
+    GROUND_FLOOR_M,
+    building_side,
+    shop_bays,
+    shop_plan,
+    wall_variants,
+)
 from vlocbench.sim.textures import WINDOW_RECESS_M
 
 
@@ -51,3 +57,16 @@ def test_a_shop_tile_recurs_only_far_from_itself():
         np.linalg.norm(p - q) for ps in centres.values() for i, p in enumerate(ps) for q in ps[:i]
     )
     assert nearest > 80.0
+
+
+def test_a_walls_cells_differ_from_their_neighbours():
+    """No cell repeats the 3 before it in its row nor the one below: a repeat one bay over gave
+    an answer one bay off that outvoted the truth."""
+    rng = np.random.default_rng(0)
+    cells = wall_variants(6, 40, 12, rng)
+    assert cells.shape == (6, 40) and set(np.unique(cells)) <= set(range(12))
+    for gap in (1, 2, 3):
+        assert np.all(cells[:, gap:] != cells[:, :-gap])
+    assert np.all(cells[1:] != cells[:-1])
+    assert np.array_equal(cells, wall_variants(6, 40, 12, np.random.default_rng(0)))
+    assert wall_variants(2, 3, 1, rng).tolist() == [[0, 0, 0], [0, 0, 0]]  # no choice

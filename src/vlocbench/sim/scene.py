@@ -397,13 +397,17 @@ class _SceneBuilder:
         rng: np.random.Generator,
         lit: np.random.Generator,
     ) -> None:
-        """A wall of one-bay x one-floor cells, each a random variant of the style's atlas; ``lit``
-        draws which of its full-height cells have a window lit at night."""
+        """A wall of one-bay x one-floor cells, each a random variant of the style's atlas
+        (``wall_variants``); ``lit`` draws which of its full-height cells have a window lit at
+        night."""
         up = np.array([0.0, 0, 1])
         normal = np.cross(u, up)  # out of the building: the quads face it
         n = max(1, round(length_m / tile.width_m))
         bay_m = length_m / n  # whole bays: windows never cut at a corner
         z, top = z_range_m
+        floors = int(np.ceil((top - z) / tile.height_m - 1e-6))
+        variants = wall_variants(floors, n, tile.variants, rng)
+        row = 0
         while z < top - 1e-6:
             height = min(tile.height_m, top - z)
             # lower walls: fine cells for headlights, and relief (upper floors are seen far and
@@ -411,7 +415,7 @@ class _SceneBuilder:
             low = z < LOW_WALL_M
             cell = self.options.cell_m if low else 0.0
             for j in range(n):
-                variant = int(rng.integers(0, tile.variants))
+                variant = int(variants[row, j])
                 corner = origin + u * (j * bay_m) + up * z
                 whole = tile.window is not None and height == tile.height_m
                 relief = whole and low
@@ -420,6 +424,7 @@ class _SceneBuilder:
                     set_back_m = tile.recess_m if relief else 0.0
                     self.lit_window(tile, corner, u, normal, bay_m, set_back_m, lit)
             z += tile.height_m
+            row += 1
 
     def facade_cell(
         self,
@@ -805,6 +810,28 @@ def _branch(start: Array, tip: Array, radius: float) -> tuple[Array, Array, NDAr
         faces += [[a, b, b + 4], [a, b + 4, a + 4]]
     uv = np.concatenate([np.zeros((4, 2)), np.ones((4, 2))])
     return verts, uv, np.array(faces, dtype=np.int64)
+
+
+WALL_VARIANT_GAP = 3  # a cell's variant differs from the 3 before it in its row and the one below
+
+
+def wall_variants(
+    floors: int, bays: int, count: int, rng: np.random.Generator
+) -> NDArray[np.int64]:
+    """The atlas variant of every cell of a wall, (floors, bays) from the bottom left: each
+    differs from the ``WALL_VARIANT_GAP`` cells before it in its row and from the cell below
+    (where ``count`` leaves a choice). Drawn freely, 1 in 12 neighbours were the same cell, whose
+    grain and windows matched one bay over: in town01 an answer 3.78 m off (one bay) with 96
+    inliers against the truth's 81 crashed the car at the same turn in every repetition."""
+    cells = np.zeros((floors, bays), np.int64)
+    for f in range(floors):
+        for j in range(bays):
+            taken = set(cells[f, max(0, j - WALL_VARIANT_GAP) : j].tolist())
+            if f:
+                taken.add(int(cells[f - 1, j]))
+            free = [v for v in range(count) if v not in taken] or list(range(count))
+            cells[f, j] = free[int(rng.integers(0, len(free)))]
+    return cells
 
 
 def shop_plan(town: Town) -> dict[int, list[int]]:
