@@ -405,10 +405,12 @@ class _SceneBuilder:
         n = max(1, round(length_m / tile.width_m))
         bay_m = length_m / n  # whole bays: windows never cut at a corner
         z, top = z_range_m
-        floors = int(np.ceil((top - z) / tile.height_m - 1e-6))
-        variants = wall_variants(floors, n, tile.variants, rng)
-        row = 0
+        floor_z = []  # the bottom of each floor's cells
         while z < top - 1e-6:
+            floor_z.append(z)
+            z += tile.height_m
+        variants = wall_variants(len(floor_z), n, tile.variants, rng)
+        for row, z in enumerate(floor_z):
             height = min(tile.height_m, top - z)
             # lower walls: fine cells for headlights, and relief (upper floors are seen far and
             # steep, and their relief cost a third more draw time in town10)
@@ -423,8 +425,6 @@ class _SceneBuilder:
                 if whole:
                     set_back_m = tile.recess_m if relief else 0.0
                     self.lit_window(tile, corner, u, normal, bay_m, set_back_m, lit)
-            z += tile.height_m
-            row += 1
 
     def facade_cell(
         self,
@@ -487,8 +487,8 @@ class _SceneBuilder:
         lit: np.random.Generator,
     ) -> None:
         """The window of the cell whose bottom-left is ``corner``, as a quad 2 cm in front of it
-        (of the window, ``set_back_m`` behind the wall's face), for the share of windows that are lit at
-        night (a rank in [0, 1) per window: the renderer lights those under
+        (of the window, ``set_back_m`` behind the wall's face), for the share of windows that are
+        lit at night (a rank in [0, 1) per window: the renderer lights those under
         ``StreetLights.window_share``, encoded in the texture coordinate u)."""
         assert tile.window is not None
         left, top, right, bottom = tile.window
@@ -841,19 +841,22 @@ def shop_plan(town: Town) -> dict[int, list[int]]:
     passed the EKF's gate; a repeat hundreds of metres away is gated."""
     count = town.spec.buildings.shop_styles
     rng = np.random.default_rng((town.spec.seed, 2))
-    used: list[list[Array]] = [[] for _ in range(count)]  # bay centres (2,) per tile
+    placed_xy: list[Array] = []  # every bay planned so far (2,), and its tile
+    placed_tile: list[int] = []
     plan: dict[int, list[int]] = {}
     for k, b in enumerate(town.buildings):
         if not b.shop:
             continue
         plan[k] = []
         for centre in shop_bays(b):
-            gap = np.array(
-                [min((np.linalg.norm(c - centre) for c in cs), default=np.inf) for cs in used]
-            )
+            gap = np.full(count, np.inf)  # from this bay to each tile's nearest use
+            if placed_xy:
+                dist = np.linalg.norm(np.array(placed_xy) - centre, axis=1)
+                np.minimum.at(gap, placed_tile, dist)
             best = np.flatnonzero(gap == gap.max())
             shop = int(best[rng.integers(0, len(best))])
-            used[shop].append(centre)
+            placed_xy.append(centre)
+            placed_tile.append(shop)
             plan[k].append(shop)
     return plan
 
