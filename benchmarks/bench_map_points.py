@@ -7,7 +7,9 @@ Checks the map's points against the scene's true surfaces (``vlocbench.bench.map
 depth render per gallery image; a point is on a surface when its depth at the keypoints that
 observe it is within ``--tolerance-m`` or 5 % of the rendered depth, else behind or in front) for
 the map of ``--town`` and ``--method`` (built under out/cache as an experiment would;
-``--experiment`` as in ``bench_illumination.py``). It prints the shares by track length, then
+``--experiment`` as in ``bench_illumination.py``). It prints the shares by track length and by
+the surface a point's first observation sees (``map_check.surface_kind``: a point off every
+surface was triangulated from matches there, e.g. a ground texture's repeats), then
 localizes ``--queries`` places of the route at noon (as ``bench_illumination.py`` places them)
 with the map as built and with only its on-surface points, and prints T1 / T2 / T3 recall and
 wrong answers of both: what the other points cost. ``--keep DIR`` keeps that second map (a
@@ -28,7 +30,7 @@ import pycolmap
 
 from bench_illumination import method_plan, route_queries
 from vlocbench.bench.localizer import LocalizationQuery
-from vlocbench.bench.map_check import PLACES, check_points
+from vlocbench.bench.map_check import PLACES, SURFACES, check_points, surface_kind
 from vlocbench.bench.metrics import confident_wrong, recall
 from vlocbench.bench.preparation import prepare_maps
 from vlocbench.bench.towns import route_named, town_named
@@ -66,7 +68,8 @@ def main() -> None:
     gallery = Gallery.load(map_info(map_dir)[1])
     rec = pycolmap.Reconstruction(map_dir / "sfm")
     with Simulator(town_named(args.town)) as sim:
-        places = check_points(rec, gallery, sim.renderer).places(args.tolerance_m)
+        check = check_points(rec, gallery, sim.renderer)
+        places = check.places(args.tolerance_m)
         counts: dict[str, dict[str, int]] = defaultdict(lambda: dict.fromkeys(PLACES, 0))
         for pid, place in places.items():
             n = rec.points3D[pid].track.length()
@@ -80,6 +83,17 @@ def main() -> None:
             total = sum(c.values())
             shares = " / ".join(f"{100 * c[k] / max(total, 1):.1f}" for k in PLACES)
             print(f"{key} | {total} | {shares}")
+        print("seen on | points | on / behind / in front (%) | of all off-surface points (%)")
+        by_surface: dict[str, dict[str, int]] = defaultdict(lambda: dict.fromkeys(PLACES, 0))
+        for pid, place in places.items():
+            by_surface[surface_kind(sim.town, check.seen_xyz_m[pid])][place] += 1
+        off_total = sum(c[k] for c in by_surface.values() for k in PLACES[1:])
+        for surface in SURFACES:
+            c = by_surface[surface]
+            total = sum(c.values())
+            shares = " / ".join(f"{100 * c[k] / max(total, 1):.1f}" for k in PLACES)
+            off = 100 * (c[PLACES[1]] + c[PLACES[2]]) / max(off_total, 1)
+            print(f"{surface} | {total} | {shares} | {off:.1f}")
         on = {pid for pid, place in places.items() if place == "on"}
 
         camera = dataclasses.replace(plan.spec.gallery.camera, name="query")

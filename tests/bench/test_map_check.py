@@ -6,7 +6,7 @@ import numpy as np
 import pycolmap
 import pytest
 
-from vlocbench.bench.map_check import PLACES, check_points
+from vlocbench.bench.map_check import PLACES, SURFACES, check_points, surface_kind
 from vlocbench.errors import LocalizationError
 from vlocbench.loc.gallery import Gallery
 from vlocbench.loc.mapping import map_info
@@ -25,9 +25,13 @@ def test_points_are_placed_on_behind_or_in_front_of_the_surfaces_their_cameras_s
     # the small town's map: most points lie on what the cameras saw
     assert shares["on"] > 0.9, shares  # 0.94; 0.55 with the grout lines of scene 5
 
+    # what each point's first observation sees: for a point on the surface, the point itself
+    on = [pid for pid, place in check.places().items() if place == "on"]
+    seen_off_m = [np.linalg.norm(check.seen_xyz_m[pid] - rec.points3D[pid].xyz) for pid in on]
+    assert np.median(seen_off_m) < 0.05, np.median(seen_off_m)
+
     # a point pushed away from the first camera that sees it, or pulled towards it, along the
     # ray: it still projects where it did in that camera, but no longer lies on the surface
-    on = [pid for pid, place in check.places().items() if place == "on"]
     moved = {}
     for pid, scale in zip(on[:2], (1.5, 0.5)):
         point = rec.points3D[pid]
@@ -43,3 +47,17 @@ def test_a_map_checked_against_another_gallery_is_a_clear_error(gallery, sift_ma
     other = Gallery(gallery.root, gallery.cameras, gallery.images[:-1])
     with pytest.raises(LocalizationError, match="not in the gallery"):
         check_points(rec, other, small_sim.renderer)
+
+
+def test_a_seen_point_is_told_by_the_surface_it_lies_on():
+    from vlocbench.sim.town import generate_town, load_town_spec
+
+    town = generate_town(load_town_spec("town01"))
+    grass, platform = town.grass[0], town.platforms[0].rect
+    centre = np.array([(grass[0] + grass[2]) / 2, (grass[1] + grass[3]) / 2, 0.16])
+    assert surface_kind(town, centre) == "grass"
+    assert surface_kind(town, centre + np.array([0, 0, 3.0])) == "walls and above"
+    x0, y0, x1, y1 = platform
+    assert surface_kind(town, np.array([(x0 + x1) / 2, (y0 + y1) / 2, 0.15])) == "paving"
+    x0, y0, _, _ = town.extent
+    assert surface_kind(town, np.array([x0 - 50.0, y0 - 50.0, 0.0])) == SURFACES[3]

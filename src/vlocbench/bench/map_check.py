@@ -10,15 +10,18 @@ localizer.
 from __future__ import annotations
 
 from collections import defaultdict
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 import numpy as np
 import pycolmap
+from numpy.typing import NDArray
 
 from vlocbench.errors import LocalizationError
 from vlocbench.geometry import invert_pose
 from vlocbench.loc.gallery import Gallery
 from vlocbench.sim.renderer import Renderer
+from vlocbench.sim.town import Town
 
 PLACES = ("on", "behind", "in front")
 
@@ -27,10 +30,13 @@ PLACES = ("on", "behind", "in front")
 class PointCheck:
     """Per 3D point id, medians over its observations: the point's depth minus the rendered
     depth at the observing keypoint (``offset_m``), and that rendered depth (``surface_m``), in
-    metres along each observing camera's optical axis."""
+    metres along each observing camera's optical axis; ``seen_xyz_m``: the world point (3,) its
+    first observation sees, on the rendered surface (what a point off every surface was
+    triangulated from)."""
 
     offset_m: dict[int, float]
     surface_m: dict[int, float]
+    seen_xyz_m: dict[int, NDArray[np.float64]]
 
     def places(self, tolerance_m: float = 0.5, relative: float = 0.05) -> dict[int, str]:
         """Each point's place: "on" its surface when the offset is within ``tolerance_m`` or
@@ -53,6 +59,7 @@ def check_points(
     """Compare every 3D point of a map's ``reconstruction`` with the scene the ``renderer`` draws
     at the poses of ``gallery``'s images (the map's gallery): one depth render per image."""
     seen: dict[int, list[tuple[float, float]]] = defaultdict(list)
+    seen_xyz: dict[int, NDArray[np.float64]] = {}
     entries = {im.name: im for im in gallery.images}
     missing = sorted(im.name for im in reconstruction.images.values() if im.name not in entries)
     if missing:
@@ -65,16 +72,43 @@ def check_points(
         cam = gallery.cameras[entry.camera]
         depth = renderer.render_depth(entry.world_from_cam, cam.width, cam.height, cam.fov_deg)
         cam_from_world = invert_pose(entry.world_from_cam)
+        focal_px = 0.5 * cam.width / np.tan(np.radians(cam.fov_deg) / 2)
+        centre_px = np.array([cam.width, cam.height]) / 2
         for p2 in image.points2D:
             if not p2.has_point3D():
                 continue
             u, v = np.round(p2.xy - 0.5).astype(int)  # COLMAP's pixel centres are at +0.5
             if 0 <= u < cam.width and 0 <= v < cam.height:
-                xyz = reconstruction.points3D[p2.point3D_id].xyz
+                pid, surface_m = p2.point3D_id, float(depth[v, u])
+                xyz = reconstruction.points3D[pid].xyz
                 z = float(cam_from_world[2, :3] @ xyz + cam_from_world[2, 3])
-                seen[p2.point3D_id].append((z - float(depth[v, u]), float(depth[v, u])))
+                seen[pid].append((z - surface_m, surface_m))
+                if pid not in seen_xyz:
+                    ray = np.append((p2.xy - centre_px) / focal_px, 1.0)
+                    seen_xyz[pid] = entry.world_from_cam[:3, :3] @ ray * surface_m
+                    seen_xyz[pid] += entry.world_from_cam[:3, 3]
     medians = {pid: np.median(np.array(obs), axis=0) for pid, obs in seen.items()}
     return PointCheck(
         {pid: float(m[0]) for pid, m in medians.items()},
         {pid: float(m[1]) for pid, m in medians.items()},
+        seen_xyz,
     )
+
+
+SURFACES = ("walls and above", "grass", "paving", "road and open ground")
+
+
+def surface_kind(town: Town, xyz_m: NDArray[np.float64]) -> str:
+    """Which of :data:`SURFACES` the scene's point ``xyz_m`` (3,) lies on: anything 0.5 m or more
+    above the ground is a wall (or a tree, a car, a sign); below, the town's grass areas and
+    sidewalk platforms (by their rectangles), else the road or the open ground."""
+    x, y, z = (float(v) for v in xyz_m)
+
+    def within(rects: Iterable[tuple[float, float, float, float]]) -> bool:
+        return any(x0 <= x <= x1 and y0 <= y <= y1 for x0, y0, x1, y1 in rects)
+
+    if z >= 0.5:
+        return SURFACES[0]
+    if within(town.grass):
+        return SURFACES[1]
+    return SURFACES[2] if within(p.rect for p in town.platforms) else SURFACES[3]

@@ -16,7 +16,9 @@ from numpy.typing import NDArray
 
 from vlocbench.interfaces import Array
 
-PAVING_BLOCK_M = 4.0  # sidewalks are laid in blocks of a world grid, each its own cut of the tile
+GROUND_BLOCK_M = (
+    4.0  # ground textures are laid in blocks of a world grid, each its own cut of the tile
+)
 
 
 @dataclass
@@ -235,11 +237,11 @@ def _platform_top(
 ) -> None:
     """A cross-shaped body (centre column plus the two side columns) and a fan per corner."""
     x0, y0, x1, y1 = rect
-    _paved(top, (x0 + r, y0, x1 - r, y1), height, cell_m, tile_m, slab_m)
+    laid_in_blocks(top, (x0 + r, y0, x1 - r, y1), height, cell_m, tile_m, slab_m)
     if r <= 0:
         return
     for xa in (x0, x1 - r):
-        _paved(top, (xa, y0 + r, xa + r, y1 - r), height, cell_m, tile_m, slab_m)
+        laid_in_blocks(top, (xa, y0 + r, xa + r, y1 - r), height, cell_m, tile_m, slab_m)
     for (cx, cy), arc in corner_arcs(rect, r, 1.0):
         n = len(arc) - 1
         ring = np.concatenate([arc, np.full((n + 1, 1), height)], axis=1)
@@ -248,33 +250,38 @@ def _platform_top(
         top.add(verts, verts[:, :2] / tile_m, faces)
 
 
-def _paved(
+def laid_in_blocks(
     top: MeshBuilder,
     rect: tuple[float, float, float, float],
     z_m: float,
     cell_m: float,
     tile_m: float,
-    slab_m: float,
+    step_m: float,
+    mirror: bool = False,
+    block_m: float = GROUND_BLOCK_M,
 ) -> None:
-    """A horizontal rectangle in the blocks of a ``PAVING_BLOCK_M`` world grid, each block's
-    texture moved by whole slabs (a pure function of the block's index, so slab edges still meet):
-    a texture laid straight repeats every ``tile_m`` along a street, and a localizer matched the
-    ground 16 m on (noon answers in the wrong place, docs/reproduction.md)."""
+    """A horizontal rectangle in the blocks of a ``block_m`` world grid, each block's texture moved
+    by whole ``step_m`` (a paving slab: slab edges still meet) and, with ``mirror``, mirrored along
+    either axis, a pure function of the block's index. A texture laid straight repeats every
+    ``tile_m``, and a localizer matched the repeats: the sidewalks' 16 m on (noon answers in the
+    wrong place), the grass's 4 m (ghost points behind the parks; docs/reproduction.md)."""
     x0, y0, x1, y1 = rect
-    slabs = round(tile_m / slab_m)
-    for xa, xb in itertools.pairwise(_grid_cuts(x0, x1, PAVING_BLOCK_M)):
-        for ya, yb in itertools.pairwise(_grid_cuts(y0, y1, PAVING_BLOCK_M)):
-            block = np.floor(np.array([xa + xb, ya + yb]) / (2 * PAVING_BLOCK_M)).astype("<i8")
+    steps = round(tile_m / step_m)
+    for xa, xb in itertools.pairwise(_grid_cuts(x0, x1, block_m)):
+        for ya, yb in itertools.pairwise(_grid_cuts(y0, y1, block_m)):
+            block = np.floor(np.array([xa + xb, ya + yb]) / (2 * block_m)).astype("<i8")
             h = zlib.crc32(block.tobytes())
-            du, dv = (h % slabs) * slab_m, ((h >> 16) % slabs) * slab_m
+            du, dv = (h % steps) * step_m, ((h >> 16) % steps) * step_m
+            # bits 8 and 24: the shifts do not read them while steps is a power of two <= 256
+            su, sv = (-1.0 if mirror and (h >> bit) & 1 else 1.0 for bit in (8, 24))
             top.quad(
                 np.array([xa, ya, z_m]),
                 np.array([1.0, 0, 0]),
                 np.array([0, 1.0, 0]),
                 xb - xa,
                 yb - ya,
-                ((xa + du) / tile_m, (ya + dv) / tile_m),
-                (1 / tile_m, 1 / tile_m),
+                (su * (xa + du) / tile_m, sv * (ya + dv) / tile_m),
+                (su / tile_m, sv / tile_m),
                 cell_m,
             )
 

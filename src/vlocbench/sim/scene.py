@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 
 from vlocbench.interfaces import Array
 from vlocbench.sim import textures as tex
-from vlocbench.sim.meshes import MeshBuilder, platform_mesh
+from vlocbench.sim.meshes import MeshBuilder, laid_in_blocks, platform_mesh
 from vlocbench.sim.town import Building, Town
 
 GROUP_STATIC, GROUP_FOLIAGE_FULL, GROUP_FOLIAGE_SPARSE = 0, 1, 2
@@ -32,7 +32,9 @@ NIGHT_PARKED_Z_M = -1000.0
 LAMP_HEIGHT_M = 6.2  # the underside of a lamp's head, where its light leaves
 LAMP_REACH_M = 1.7  # from the pole to the head, towards the road
 # bump when the look of the towns changes: galleries and maps (and results) are keyed by it
-SCENE_VERSION = 7  # 7: window relief, shop tiles apart, paving in shifted blocks
+SCENE_VERSION = (
+    8  # 7: window relief, shop tiles apart, paving in shifted blocks; 8: grass 16 m in blocks
+)
 GROUND_FLOOR_M = 4.2
 LOW_WALL_M = 12.0  # walls below: vertices every cell_m (headlights), windows set back
 SHOP_ATLAS_COLUMNS = 8
@@ -134,10 +136,13 @@ class _SceneBuilder:
         specular: float = 0.1,
         shininess: float = 0.1,
         emission: float = 0.0,
+        texrepeat: float = 1.0,
     ) -> None:
+        """``texrepeat``: the texture's repeats per unit of the meshes' texture coordinates."""
         m = self.spec.add_material(name=name)
         if texture is not None:
             m.textures[mujoco.mjtTextureRole.mjTEXROLE_RGB] = texture
+            m.texrepeat = [texrepeat, texrepeat]
         m.rgba = list(rgba) if len(rgba) == 4 else [*rgba, 1.0]
         m.specular, m.shininess, m.emission = specular, shininess, emission
         self.materials.add(name)
@@ -210,7 +215,11 @@ class _SceneBuilder:
             autumn = {"ground": "autumn_grass", "grass": "autumn_grass"}.get(family, base)
             self.material(f"{family}_autumn", autumn, specular=0.05)
             winter = {"road": "road_winter", "paving": "paving_winter"}.get(family, "snow")
-            self.material(f"{family}_winter", winter, specular=0.2)
+            # the snow's 4 m tile on surfaces laid for grass's larger one keeps its own size
+            repeat = (
+                tex.ground_tile_m(base) / tex.ground_tile_m("concrete") if winter == "snow" else 1
+            )
+            self.material(f"{family}_winter", winter, specular=0.2, texrepeat=repeat)
         self.material("intersection", "asphalt", specular=0.05)
         self.material("intersection_winter", "asphalt_winter", specular=0.2)
         self.material("intersection_autumn", "asphalt", specular=0.05)
@@ -317,34 +326,21 @@ class _SceneBuilder:
     def ground(self) -> None:
         x0, y0, x1, y1 = self.town.extent
         m = 300.0
-        self.meshes["ground"].quad(
-            np.array([x0 - m, y0 - m, 0.0]),
-            np.array([1.0, 0, 0]),
-            np.array([0, 1.0, 0]),
-            x1 - x0 + 2 * m,
-            y1 - y0 + 2 * m,
-            ((x0 - m) / 4, (y0 - m) / 4),
-            (0.25, 0.25),
-            20.0,
-        )
+        # the open ground, grass: in 16 m blocks, 20 m cells (what the fog needs) as before
+        tile_m = tex.ground_tile_m("grass")
+        rect = (x0 - m, y0 - m, x1 + m, y1 + m)
+        laid_in_blocks(self.meshes["ground"], rect, 0.0, 20.0, tile_m, tile_m / 64, True, 16.0)
         for rect in self.town.sand:
-            self.flat("sand", rect, 0.01, 4.0)
+            self.flat("sand", rect, 0.01, tex.ground_tile_m("sand"))
         for rect in self.town.water:
             self.flat("water", rect, 0.005, 8.0)
 
     def flat(
         self, material: str, rect: tuple[float, float, float, float], z: float, tile_m: float
     ) -> None:
-        x0, y0, x1, y1 = rect
-        self.meshes[material].quad(
-            np.array([x0, y0, z]),
-            np.array([1.0, 0, 0]),
-            np.array([0, 1.0, 0]),
-            x1 - x0,
-            y1 - y0,
-            (x0 / tile_m, y0 / tile_m),
-            (1 / tile_m, 1 / tile_m),
-            self.options.cell_m,
+        """A horizontal ground texture over ``rect``, in mirrored and shifted blocks."""
+        laid_in_blocks(
+            self.meshes[material], rect, z, self.options.cell_m, tile_m, tile_m / 64, True
         )
 
     def platforms(self) -> None:
@@ -367,7 +363,7 @@ class _SceneBuilder:
                     "curb", f"sidewalk {k}", c, np.array([(bx1 - bx0) / 2, (by1 - by0) / 2, h / 2])
                 )
         for rect in self.town.grass:
-            self.flat("grass", rect, h + 0.01, 4.0)
+            self.flat("grass", rect, h + 0.01, tex.ground_tile_m("grass"))
 
     def shopfronts(self, origin: Array, u: Array, length_m: float, shops: list[int]) -> None:
         """A row of shops along a ground floor, ``shops`` its atlas tiles from ``origin``."""

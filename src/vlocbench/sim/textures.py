@@ -409,9 +409,20 @@ def paving(rng: np.random.Generator, snow: float = 0.0) -> Image:
     return _snow(_finish(img, rng), rng, snow)
 
 
+# grass covers the parks and the town's open ground: laid as a 4 m tile, its repeats gave the maps
+# ghost points behind every park (docs/reproduction.md); the other kinds stay 4 m
+GROUND_TILE_M = {"grass": 16.0, "autumn_grass": 16.0}
+
+
+def ground_tile_m(kind: str) -> float:
+    """The side of ``kind``'s ground tile (m)."""
+    return GROUND_TILE_M.get(kind, 4.0)
+
+
 def ground(kind: str, rng: np.random.Generator, snow: float = 0.0) -> Image:
-    """A 4 m tile of grass, sand, water, roof gravel, bark, leaves or concrete."""
-    size = 256
+    """A tile of grass, sand, water, roof gravel, bark, leaves or concrete of 64 px a metre over
+    :func:`ground_tile_m` (grass 16 m, the others 4 m; the scene stretches water's over 8 m)."""
+    size = round(64 * ground_tile_m(kind))
     colors = {
         "grass": (75, 120, 50),
         "autumn_grass": (120, 115, 60),
