@@ -60,4 +60,8 @@ def test_a_seen_point_is_told_by_the_surface_it_lies_on():
     x0, y0, x1, y1 = platform
     assert surface_kind(town, np.array([(x0 + x1) / 2, (y0 + y1) / 2, 0.15])) == "paving"
     x0, y0, _, _ = town.extent
-    assert surface_kind(town, np.array([x0 - 50.0, y0 - 50.0, 0.0])) == SURFACES[3]
+    assert surface_kind(town, np.array([x0 - 50.0, y0 - 50.0, 0.0])) == "road and open ground"
+    tx, ty, trunk_m, crown_m = town.trees[0]
+    assert surface_kind(town, np.array([tx, ty, trunk_m + crown_m])) == "trees"
+    assert surface_kind(town, np.array([tx + 2.0 * crown_m, ty, trunk_m + crown_m])) != "trees"
+    assert set(SURFACES) == {"trees", "walls and above", "grass", "paving", "road and open ground"}

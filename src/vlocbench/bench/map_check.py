@@ -95,20 +95,27 @@ def check_points(
     )
 
 
-SURFACES = ("walls and above", "grass", "paving", "road and open ground")
+SURFACES = ("trees", "walls and above", "grass", "paving", "road and open ground")
 
 
 def surface_kind(town: Town, xyz_m: NDArray[np.float64]) -> str:
-    """Which of :data:`SURFACES` the scene's point ``xyz_m`` (3,) lies on: anything 0.5 m or more
-    above the ground is a wall (or a tree, a car, a sign); below, the town's grass areas and
-    sidewalk platforms (by their rectangles), else the road or the open ground."""
+    """Which of :data:`SURFACES` the scene's point ``xyz_m`` (3,) lies on: a tree's crown (within
+    1.1 times its radii, the ellipsoid its leaves are drawn around) or trunk; anything else 0.5 m
+    or more above the ground is a wall (or a car, a sign, a lamp); below, the town's grass areas
+    and sidewalk platforms (by their rectangles), else the road or the open ground."""
     x, y, z = (float(v) for v in xyz_m)
 
     def within(rects: Iterable[tuple[float, float, float, float]]) -> bool:
         return any(x0 <= x <= x1 and y0 <= y <= y1 for x0, y0, x1, y1 in rects)
 
+    if len(town.trees):
+        tx, ty, trunk_m, crown_m = town.trees.T
+        flat_m = np.hypot(tx - x, ty - y)
+        crown = (flat_m / crown_m) ** 2 + ((z - trunk_m - 0.9 * crown_m) / (1.1 * crown_m)) ** 2
+        if np.any(crown <= 1.1**2) or np.any((flat_m <= 0.3) & (z <= trunk_m + crown_m)):
+            return SURFACES[0]
     if z >= 0.5:
-        return SURFACES[0]
-    if within(town.grass):
         return SURFACES[1]
-    return SURFACES[2] if within(p.rect for p in town.platforms) else SURFACES[3]
+    if within(town.grass):
+        return SURFACES[2]
+    return SURFACES[3] if within(p.rect for p in town.platforms) else SURFACES[4]
