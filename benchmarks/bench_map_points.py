@@ -54,6 +54,12 @@ def on_surface_map(map_dir: Path, keep: set[int], out: Path) -> None:
     rec.write(out / "sfm")
 
 
+def place_shares(counts: dict[str, int]) -> str:
+    """``points | on / behind / in front (%)`` of points counted by place."""
+    total = sum(counts.values())
+    return f"{total} | " + " / ".join(f"{100 * counts[k] / max(total, 1):.1f}" for k in PLACES)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--town", default="town01")
@@ -79,10 +85,7 @@ def main() -> None:
         print(f"{len(places)} points; tolerance {args.tolerance_m} m or 5 % of the depth")
         print("track length | points | on / behind / in front (%)")
         for key in ("all", "2", "3-4", "5+"):
-            c = counts[key]
-            total = sum(c.values())
-            shares = " / ".join(f"{100 * c[k] / max(total, 1):.1f}" for k in PLACES)
-            print(f"{key} | {total} | {shares}")
+            print(f"{key} | {place_shares(counts[key])}")
         print("seen on | points | on / behind / in front (%) | of all off-surface points (%)")
         by_surface: dict[str, dict[str, int]] = defaultdict(lambda: dict.fromkeys(PLACES, 0))
         for pid, place in places.items():
@@ -90,10 +93,8 @@ def main() -> None:
         off_total = sum(c[k] for c in by_surface.values() for k in PLACES[1:])
         for surface in SURFACES:
             c = by_surface[surface]
-            total = sum(c.values())
-            shares = " / ".join(f"{100 * c[k] / max(total, 1):.1f}" for k in PLACES)
             off = 100 * (c[PLACES[1]] + c[PLACES[2]]) / max(off_total, 1)
-            print(f"{surface} | {total} | {shares} | {off:.1f}")
+            print(f"{surface} | {place_shares(c)} | {off:.1f}")
         on = {pid for pid, place in places.items() if place == "on"}
 
         camera = dataclasses.replace(plan.spec.gallery.camera, name="query")

@@ -72,8 +72,7 @@ def check_points(
         cam = gallery.cameras[entry.camera]
         depth = renderer.render_depth(entry.world_from_cam, cam.width, cam.height, cam.fov_deg)
         cam_from_world = invert_pose(entry.world_from_cam)
-        focal_px = 0.5 * cam.width / np.tan(np.radians(cam.fov_deg) / 2)
-        centre_px = np.array([cam.width, cam.height]) / 2
+        cam_from_px = np.linalg.inv(cam.K)
         for p2 in image.points2D:
             if not p2.has_point3D():
                 continue
@@ -84,7 +83,7 @@ def check_points(
                 z = float(cam_from_world[2, :3] @ xyz + cam_from_world[2, 3])
                 seen[pid].append((z - surface_m, surface_m))
                 if pid not in seen_xyz:
-                    ray = np.append((p2.xy - centre_px) / focal_px, 1.0)
+                    ray = cam_from_px @ np.append(p2.xy - 0.5, 1.0)
                     seen_xyz[pid] = entry.world_from_cam[:3, :3] @ ray * surface_m
                     seen_xyz[pid] += entry.world_from_cam[:3, 3]
     medians = {pid: np.median(np.array(obs), axis=0) for pid, obs in seen.items()}

@@ -16,9 +16,8 @@ from numpy.typing import NDArray
 
 from vlocbench.interfaces import Array
 
-GROUND_BLOCK_M = (
-    4.0  # ground textures are laid in blocks of a world grid, each its own cut of the tile
-)
+# ground textures are laid in blocks of a world grid, each its own cut of the tile
+GROUND_BLOCK_M = 4.0
 
 
 @dataclass

@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 
 from vlocbench.interfaces import Array
 from vlocbench.sim import textures as tex
-from vlocbench.sim.meshes import MeshBuilder, laid_in_blocks, platform_mesh
+from vlocbench.sim.meshes import GROUND_BLOCK_M, MeshBuilder, laid_in_blocks, platform_mesh
 from vlocbench.sim.town import Building, Town
 
 GROUP_STATIC, GROUP_FOLIAGE_FULL, GROUP_FOLIAGE_SPARSE = 0, 1, 2
@@ -32,10 +32,10 @@ NIGHT_PARKED_Z_M = -1000.0
 LAMP_HEIGHT_M = 6.2  # the underside of a lamp's head, where its light leaves
 LAMP_REACH_M = 1.7  # from the pole to the head, towards the road
 # bump when the look of the towns changes: galleries and maps (and results) are keyed by it
-SCENE_VERSION = (
-    8  # 7: window relief, shop tiles apart, paving in shifted blocks; 8: grass 16 m in blocks
-)
+# 7: window relief, shop tiles apart, paving in shifted blocks; 8: grass 16 m in blocks
+SCENE_VERSION = 8
 GROUND_FLOOR_M = 4.2
+GROUND_SHIFTS = 64  # the moves a ground block's texture may take, per tile (a power of two)
 LOW_WALL_M = 12.0  # walls below: vertices every cell_m (headlights), windows set back
 SHOP_ATLAS_COLUMNS = 8
 SKY_SIZE = 64
@@ -327,21 +327,27 @@ class _SceneBuilder:
         x0, y0, x1, y1 = self.town.extent
         m = 300.0
         # the open ground, grass: in 16 m blocks, 20 m cells (what the fog needs) as before
-        tile_m = tex.ground_tile_m("grass")
         rect = (x0 - m, y0 - m, x1 + m, y1 + m)
-        laid_in_blocks(self.meshes["ground"], rect, 0.0, 20.0, tile_m, tile_m / 64, True, 16.0)
+        self.flat("ground", rect, 0.0, tex.ground_tile_m("grass"), cell_m=20.0, block_m=16.0)
         for rect in self.town.sand:
             self.flat("sand", rect, 0.01, tex.ground_tile_m("sand"))
         for rect in self.town.water:
             self.flat("water", rect, 0.005, 8.0)
 
     def flat(
-        self, material: str, rect: tuple[float, float, float, float], z: float, tile_m: float
+        self,
+        material: str,
+        rect: tuple[float, float, float, float],
+        z: float,
+        tile_m: float,
+        cell_m: float | None = None,
+        block_m: float = GROUND_BLOCK_M,
     ) -> None:
-        """A horizontal ground texture over ``rect``, in mirrored and shifted blocks."""
-        laid_in_blocks(
-            self.meshes[material], rect, z, self.options.cell_m, tile_m, tile_m / 64, True
-        )
+        """A horizontal ground texture over ``rect``, in mirrored blocks each moved by one of
+        ``GROUND_SHIFTS`` steps of its tile; cells of ``cell_m`` (the scene's by default)."""
+        cell_m = self.options.cell_m if cell_m is None else cell_m
+        step_m = tile_m / GROUND_SHIFTS
+        laid_in_blocks(self.meshes[material], rect, z, cell_m, tile_m, step_m, True, block_m)
 
     def platforms(self) -> None:
         h = self.town.spec.road.curb_height_m
