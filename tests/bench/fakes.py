@@ -22,7 +22,7 @@ from vlocbench.bench.records import (
     Trajectory,
 )
 from vlocbench.bench.store import ResultStore, run_hash
-from vlocbench.bench.worker import EpisodeOutcome
+from vlocbench.bench.worker import EpisodeOutcome, Job
 from vlocbench.config import to_dict
 
 CONTROL_ENV = "VLOCBENCH_TEST_FAKES"  # folder of marker files that steer the fakes
@@ -120,7 +120,12 @@ def _marker(task: EpisodeTask, what: str) -> Path | None:
     )
 
 
-def run_fake(task: EpisodeTask) -> EpisodeOutcome:
+def run_fake(job: Job) -> list[EpisodeOutcome]:
+    """Instant episodes (see :func:`fake_episode`), one after another."""
+    return [fake_episode(task) for task in job]
+
+
+def fake_episode(task: EpisodeTask) -> EpisodeOutcome:
     """Instant episode; a worker dies (``os._exit``) on the first attempt of tasks with a ``die``
     marker, on every attempt with ``always-die``; ``sleep`` markers slow a task down (``sleep-all``
     every task)."""

@@ -105,3 +105,34 @@ def test_a_run_on_the_hidden_set_writes_neither_its_seed_nor_its_towns_specs(tmp
         content = path.read_bytes()
         for secret in secrets:
             assert secret.encode() not in content, (path, secret)
+
+
+def test_recall_drives_of_several_methods_share_a_drive_in_a_run(tiny, tmp_path):
+    """The recall episodes of ``sift`` and a gated ``sift`` in one setup drive once (one worker
+    job): each stores what it stores when driven alone."""
+    import yaml
+
+    root, _ = tiny
+    spec = yaml.safe_load((root / "tiny.yaml").read_text())
+    gated = {"name": "sift-40", "features": "sift", "matcher": "nn-ratio", "retrieval": "vlad"}
+    gated["localizer"] = {"min_inliers": 40}
+    recall_only = {**spec, "failure": False, "baseline": False, "methods": ["sift", gated]}
+    shared = run_experiment(
+        load_experiment({**recall_only, "output": str(tmp_path / "shared")}), progress=False
+    )
+    alone = run_experiment(
+        load_experiment({**recall_only, "methods": [gated], "output": str(tmp_path / "alone")}),
+        progress=False,
+    )
+    assert (shared.finished, shared.errors, alone.finished) == (4, 0, 2)
+    rows = {}
+    for folder in (root / "out", tmp_path / "alone", tmp_path / "shared"):
+        with ResultStore(folder, "tiny") as store:
+            rows[folder.name] = {r.key: r.metrics for r in store.rows() if r.kind == "recall"}
+    solo = {**rows["out"], **rows["alone"]}
+    assert set(rows["shared"]) == set(solo)
+    for key, metrics in rows["shared"].items():
+        for name in ("queries", "recall", "recall_ekf", "place_recall", "lock_losses_per_km"):
+            assert getattr(metrics, name) == getattr(solo[key], name), name
+    answered = sorted(m.recall[-1] for m in rows["shared"].values())
+    assert answered[0] < answered[-1]  # the two methods differ: the comparison can fail

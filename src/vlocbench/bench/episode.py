@@ -18,8 +18,9 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import Literal, Protocol
 
 import numpy as np
 
@@ -33,7 +34,7 @@ from vlocbench.bench.records import (
 )
 from vlocbench.config import config_hash, require, require_one_of
 from vlocbench.geometry import planar_pose, pose_error, rpy_of, wrap_angle
-from vlocbench.interfaces import Array
+from vlocbench.interfaces import Array, Control
 from vlocbench.nav import (
     ControllerConfig,
     Ekf,
@@ -52,7 +53,7 @@ from vlocbench.nav import (
     WaypointPath,
     WheelOdometry,
 )
-from vlocbench.sim import Simulator, VehicleParams, VehicleState
+from vlocbench.sim import Camera, Frame, StepResult, VehicleParams, VehicleState
 
 # part of every episode key: bump when the same config gives a different result
 # 3: the paper's navigation stack as the default (EKF, local planner, controller, collisions only),
@@ -120,6 +121,30 @@ class EpisodeConfig:
         require(self.time_limit_factor >= 1, "time_limit_factor", "must be >= 1")
         require_one_of(self.mode, ("navigate", "ground_truth"), "mode")
         require_one_of(self.speed_source, ("ekf", "speedometer"), "speed_source")
+
+
+class EpisodeSimulator(Protocol):
+    """What an episode asks of its simulator: a :class:`~vlocbench.sim.Simulator`, or a shared
+    drive's stand-in for one (:mod:`vlocbench.bench.shared_drive`)."""
+
+    @property
+    def dt_s(self) -> float: ...
+
+    @property
+    def params(self) -> VehicleParams: ...
+
+    @property
+    def state(self) -> VehicleState: ...
+
+    def set_vehicle(self, vehicle: VehicleParams) -> None: ...
+
+    def reset(self, x_m: float, y_m: float, yaw_rad: float) -> VehicleState: ...
+
+    def teleport(self, x_m: float, y_m: float, yaw_rad: float) -> VehicleState: ...
+
+    def step(self, control: Control) -> StepResult: ...
+
+    def render(self, cameras: Sequence[Camera]) -> list[Frame]: ...
 
 
 @dataclass
@@ -206,7 +231,7 @@ class Episode:
 
     def __init__(
         self,
-        sim: Simulator,
+        sim: EpisodeSimulator,
         path: WaypointPath,
         localizer: Localizer | None,
         config: EpisodeConfig,
@@ -235,6 +260,7 @@ class Episode:
         self.next_query_s = 1.0 / config.localization_rate_hz
         self.distance_m = 0.0
         self.offsets_m: list[float] = []
+        self.steps, self.t, self.limit_s, self.wall_s = 0, 0.0, 0.0, 0.0
 
     # -- frames: the EKF works on the rear axle, everything else on the car's centre ----------
     def _rear(self, x: float, y: float, yaw: float) -> tuple[float, float, float]:
@@ -341,18 +367,41 @@ class Episode:
             self.lock_losses_s.append(t)
             self.lock_lost_since_s = None
 
-    # -- the loop ----------------------------------------------------------------------------
+    # -- the loop: start, advance until it stops running, finish ------------------------------
     def run(self) -> EpisodeResult:
-        c = self.config
+        self.start()
+        while self.running:
+            self.advance()
+        return self.finish()
+
+    def start(self) -> None:
+        """Put the car at the route's start."""
         wall0 = time.perf_counter()
+        c = self.config
+        self.limit_s = c.time_limit_factor * self.path.length_m / c.controller.target_speed_mps
+        self.limit_s += 60.0
+        self.steps, self.t = 0, 0.0
         self._restart_at(0, 0.0)
-        limit_s = c.time_limit_factor * self.path.length_m / c.controller.target_speed_mps + 60.0
-        step, t = 0, 0.0
-        while not self.progress.finished and t < limit_s:
-            step += 1
-            self._step(t, step * self.dt_s)
-            t = step * self.dt_s
-        return self._finish(t, time.perf_counter() - wall0)
+        self.wall_s = time.perf_counter() - wall0
+
+    @property
+    def running(self) -> bool:
+        """Until the goal, or out of time."""
+        return not self.progress.finished and self.t < self.limit_s
+
+    def advance(self) -> None:
+        """One step of ``dt_s``."""
+        wall0 = time.perf_counter()
+        self.steps += 1
+        self._step(self.t, self.steps * self.dt_s)
+        self.t = self.steps * self.dt_s
+        self.wall_s += time.perf_counter() - wall0
+
+    def finish(self) -> EpisodeResult:
+        """The result, once it stopped running; ``wall_time_s`` is this episode's own time in
+        :meth:`start` and :meth:`advance` (episodes may advance in turns: see
+        :mod:`vlocbench.bench.shared_drive`)."""
+        return self._finish(self.t, self.wall_s)
 
     def _step(self, t: float, t_next: float) -> None:
         """One simulation step from ``t``: localize when due, steer, move, fuse the odometry,
@@ -428,7 +477,7 @@ class Episode:
 
 
 def run_episode(
-    sim: Simulator,
+    sim: EpisodeSimulator,
     path: WaypointPath,
     localizer: Localizer | None = None,
     config: EpisodeConfig | None = None,

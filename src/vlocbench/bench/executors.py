@@ -1,9 +1,10 @@
 """Executors: run episode tasks inline, on a local process pool or on a Dask cluster, and write
 each outcome to the store as it arrives (the driver alone writes).
 
-At most one episode per worker is in flight, so a worker process that dies (a crash, the OOM
-killer) takes only those with it: they are retried up to ``max_attempts`` times; an episode that
-raises is recorded with its error and the run goes on.
+Tasks go to workers as jobs (:func:`~vlocbench.bench.worker.jobs_of`): one episode, or the recall
+episodes of one setup that share a drive. At most one job per worker is in flight, so a worker
+process that dies (a crash, the OOM killer) takes only its episodes with it: they are retried up to
+``max_attempts`` times; an episode that raises is recorded with its error and the run goes on.
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ from vlocbench.bench.metrics import episode_metrics
 from vlocbench.bench.progress import Progress
 from vlocbench.bench.store import EpisodeRow, ResultStore
 from vlocbench.bench.towns import town_named
-from vlocbench.bench.worker import EpisodeOutcome, run_task, worker_init
+from vlocbench.bench.worker import EpisodeOutcome, Job, jobs_of, run_job, worker_init
 from vlocbench.config import to_dict
 from vlocbench.errors import ConfigError
 
@@ -45,9 +46,7 @@ class Tally:
     slots: int = 1
 
 
-def _row(
-    task: EpisodeTask, outcome: EpisodeOutcome | None, error: str | None, attempts: int
-) -> EpisodeRow:
+def _row(task: EpisodeTask, outcome: EpisodeOutcome, attempts: int) -> EpisodeRow:
     config = {
         "kind": task.kind,
         "town": task.town,
@@ -61,7 +60,7 @@ def _row(
         "episode": to_dict(task.episode),
         "key": task.key,
     }
-    metrics = episode_metrics(outcome.result) if outcome else None
+    ok = outcome.result is not None
     return EpisodeRow(
         key=task.key,
         kind=task.kind,
@@ -71,10 +70,10 @@ def _row(
         repetition=task.repetition,
         seed=task.episode.seed,
         config=config,
-        status="ok" if outcome else "error",
-        error=error,
-        metrics=metrics,
-        wall_s=outcome.wall_s if outcome else None,
+        status="ok" if ok else "error",
+        error=outcome.error,
+        metrics=episode_metrics(outcome.result) if outcome.result is not None else None,
+        wall_s=outcome.wall_s if ok else None,
         attempts=attempts,
     )
 
@@ -86,15 +85,21 @@ class Recorder:
         self.store, self.tally = store, tally
         self.bar = Progress("episodes", total, "episode") if progress and total else None
 
-    def __call__(
-        self, task: EpisodeTask, outcome: EpisodeOutcome | None, error: str | None, attempts: int
-    ) -> None:
+    def job(self, job: Job, outcomes: list[EpisodeOutcome], attempts: int) -> None:
+        """A job's outcomes: each episode's result or error."""
+        for task, outcome in zip(job, outcomes, strict=True):
+            self._write(task, outcome, attempts)
+
+    def failed(self, job: Job, error: str, attempts: int) -> None:
+        """A job that ended without outcomes: the error for each of its episodes."""
+        for task in job:
+            self._write(task, EpisodeOutcome(task.key, None, 0.0, error), attempts)
+
+    def _write(self, task: EpisodeTask, outcome: EpisodeOutcome, attempts: int) -> None:
         t = time.perf_counter()
-        self.store.write_episode(
-            _row(task, outcome, error, attempts), outcome.result if outcome else None
-        )
+        self.store.write_episode(_row(task, outcome, attempts), outcome.result)
         self.tally.store_s += time.perf_counter() - t
-        if outcome:
+        if outcome.result is not None:
             self.tally.finished += 1
             self.tally.episode_s += outcome.wall_s
         else:
@@ -112,7 +117,7 @@ class Recorder:
             self.bar.close()
 
 
-Runner = Callable[[EpisodeTask], EpisodeOutcome]
+Runner = Callable[[Job], list[EpisodeOutcome]]
 
 
 def execute(
@@ -120,41 +125,44 @@ def execute(
     store: ResultStore,
     workers: int = 1,
     scheduler: str | None = None,
-    runner: Runner = run_task,
+    runner: Runner = run_job,
     max_attempts: int = 3,
     progress: bool = True,
+    share_drives: bool = True,
 ) -> Tally:
     """Run ``tasks``, writing each outcome as it arrives.
 
-    ``workers == 1`` without a scheduler runs in this process. Otherwise at most one episode per
-    worker is in flight, so a worker that dies takes only the episodes in flight with it: they are
-    run again (up to ``max_attempts`` in all) on a fresh pool; Dask reschedules them itself. An
-    interruption (Ctrl-C, SIGTERM, a store error) stops every worker of a local pool before it
-    propagates; what was stored stays stored.
+    The tasks run as jobs (:func:`~vlocbench.bench.worker.jobs_of`; ``share_drives=False``: one
+    episode each). ``workers == 1`` without a scheduler runs in this process. Otherwise at most one
+    job per worker is in flight, so a worker that dies takes only the episodes in flight with it:
+    they are run again (up to ``max_attempts`` in all) on a fresh pool; Dask reschedules them
+    itself. An interruption (Ctrl-C, SIGTERM, a store error) stops every worker of a local pool
+    before it propagates; what was stored stays stored.
     """
     check_workers(workers)
     tally = Tally(slots=workers)
     record = Recorder(store, tally, len(tasks), progress)
+    jobs = jobs_of(tasks, share_drives)
     try:
         if scheduler is not None:
-            _run_on_dask(tasks, scheduler, runner, record, tally)
+            _run_on_dask(jobs, scheduler, runner, record, tally)
         elif workers == 1:
-            _run_inline(tasks, runner, record)
+            _run_inline(jobs, runner, record)
         else:
-            _run_on_pool(tasks, workers, runner, record, tally, max_attempts)
+            _run_on_pool(jobs, workers, runner, record, tally, max_attempts)
     finally:
         record.close()
     return tally
 
 
-def _run_inline(tasks: list[EpisodeTask], runner: Runner, record: Recorder) -> None:
-    for task in tasks:
+def _run_inline(jobs: list[Job], runner: Runner, record: Recorder) -> None:
+    for job in jobs:
         try:
-            outcome = runner(task)
+            outcomes = runner(job)
         except Exception:  # an episode's bug must not end the run: record it
-            record(task, None, traceback.format_exc(limit=8), 1)
+            record.failed(job, traceback.format_exc(limit=8), 1)
             continue
-        record(task, outcome, None, 1)
+        record.job(job, outcomes, 1)
 
 
 def local_pool(workers: int) -> cf.ProcessPoolExecutor:
@@ -167,59 +175,60 @@ def local_pool(workers: int) -> cf.ProcessPoolExecutor:
 
 
 def _run_on_pool(
-    tasks: list[EpisodeTask],
+    jobs: list[Job],
     workers: int,
     runner: Runner,
     record: Recorder,
     tally: Tally,
     max_attempts: int,
 ) -> None:
-    """Local worker processes; a pool broken by a dead worker is replaced, and the episodes that
+    """Local worker processes; a pool broken by a dead worker is replaced, and the jobs that
     were in flight in it run again."""
-    attempts = dict.fromkeys((t.key for t in tasks), 0)
-    pending = deque(tasks)
+    attempts = dict.fromkeys((job[0].key for job in jobs), 0)
+    pending = deque(jobs)
     while pending:
         lost = _pool_round(pending, workers, runner, record, attempts)
         if lost:
             tally.workers_lost += 1
-        for task in lost:
-            if attempts[task.key] < max_attempts:
-                pending.appendleft(task)
-                tally.retried += 1
+        for job in lost:
+            if attempts[job[0].key] < max_attempts:
+                pending.appendleft(job)
+                tally.retried += len(job)
             else:
-                record(task, None, "its worker process died", attempts[task.key])
+                record.failed(job, "its worker process died", attempts[job[0].key])
 
 
 def _pool_round(
-    pending: deque[EpisodeTask],
+    pending: deque[Job],
     workers: int,
     runner: Runner,
     record: Recorder,
     attempts: dict[str, int],
-) -> list[EpisodeTask]:
-    """Run ``pending`` on one pool until it is empty or the pool breaks; returns the episodes
-    that were in flight when it broke."""
+) -> list[Job]:
+    """Run ``pending`` on one pool until it is empty or the pool breaks; returns the jobs that
+    were in flight when it broke."""
     pool = local_pool(workers)
-    running: dict[cf.Future, EpisodeTask] = {}
-    lost: list[EpisodeTask] = []
+    running: dict[cf.Future, Job] = {}
+    lost: list[Job] = []
     try:
         while (pending or running) and not lost:
             while pending and len(running) < workers:
-                task = pending.popleft()
-                attempts[task.key] += 1
-                running[pool.submit(runner, task)] = task
+                job = pending.popleft()
+                attempts[job[0].key] += 1
+                running[pool.submit(runner, job)] = job
             done, _ = cf.wait(running, return_when=cf.FIRST_COMPLETED)
             for future in done:
-                task = running.pop(future)
+                job = running.pop(future)
+                n = attempts[job[0].key]
                 try:
-                    outcome = future.result()
+                    outcomes = future.result()
                 except cf.process.BrokenProcessPool:
-                    lost.append(task)
+                    lost.append(job)
                     continue
                 except Exception as exc:
-                    record(task, None, _describe(exc), attempts[task.key])
+                    record.failed(job, _describe(exc), n)
                     continue
-                record(task, outcome, None, attempts[task.key])
+                record.job(job, outcomes, n)
         # a broken pool: everything still in flight died with it
         return [*lost, *running.values()] if lost else []
     finally:
@@ -235,30 +244,30 @@ def kill_workers(pool: cf.ProcessPoolExecutor) -> None:
 
 
 def _run_on_dask(
-    tasks: list[EpisodeTask],
+    jobs: list[Job],
     scheduler: str,
     runner: Runner,
     record: Recorder,
     tally: Tally,
     poll_s: float = 1.0,
 ) -> None:
-    """A Dask cluster: twice as many episodes in flight as it has threads, so that its workers
-    stay fed. Dask reruns the episodes of a worker that dies (giving up with ``KilledWorker``);
-    the scheduler's count of episodes caught in a worker's death and the workers that vanished
-    go into the tally."""
+    """A Dask cluster: twice as many jobs in flight as it has threads, so that its workers stay
+    fed. Dask reruns the jobs of a worker that dies (giving up with ``KilledWorker``); the
+    scheduler's count of jobs caught in a worker's death and the workers that vanished go into
+    the tally."""
     client = _dask_client(scheduler)
     try:
         tally.slots = sum(client.nthreads().values()) or 1
         window = 2 * tally.slots
-        pending = deque(tasks)
-        running: dict[Any, EpisodeTask] = {}
+        pending = deque(jobs)
+        running: dict[Any, Job] = {}
         seen = set(client.scheduler_info()["workers"])
         prefix, suspicious_before = None, 0
         while pending or running:
             while pending and len(running) < window:
-                task = pending.popleft()
-                future = client.submit(runner, task, pure=False)
-                running[future] = task
+                job = pending.popleft()
+                future = client.submit(runner, job, pure=False)
+                running[future] = job
                 if prefix is None:
                     from dask.utils import key_split
 
@@ -271,13 +280,13 @@ def _run_on_dask(
             if done and prefix is not None:  # before the results are released
                 tally.retried = _dask_suspicious(client, prefix) - suspicious_before
             for future in done:
-                task = running.pop(future)
+                job = running.pop(future)
                 try:
-                    outcome = future.result()
+                    outcomes = future.result()
                 except Exception as exc:
-                    record(task, None, _describe(exc), 1)
+                    record.failed(job, _describe(exc), 1)
                     continue
-                record(task, outcome, None, 1)
+                record.job(job, outcomes, 1)
         for future in running:
             future.cancel()
     finally:

@@ -15,7 +15,7 @@ from vlocbench.bench.experiment import EpisodeTask, ExperimentPlan
 from vlocbench.bench.methods import check_methods
 from vlocbench.bench.preparation import prepare_maps
 from vlocbench.bench.store import ResultStore, StoreError, run_hash
-from vlocbench.bench.worker import run_task
+from vlocbench.bench.worker import run_job
 from vlocbench.config import to_dict
 
 logger = logging.getLogger(__name__)
@@ -57,9 +57,12 @@ def run_experiment(
     workers: int = 1,
     scheduler: str | None = None,
     progress: bool = True,
-    runner: Runner = run_task,
+    runner: Runner = run_job,
+    share_drives: bool = True,
 ) -> RunSummary:
-    """Run what the store of ``plan.output_dir`` does not have yet; returns the counts."""
+    """Run what the store of ``plan.output_dir`` does not have yet; returns the counts.
+    ``share_drives=False`` drives every recall episode on its own (see
+    :mod:`vlocbench.bench.shared_drive`), for measuring what sharing saves."""
     check_workers(workers)  # before hours of gallery and map building, not after
     check_methods(plan.spec.methods)
     t0 = time.perf_counter()
@@ -76,7 +79,15 @@ def run_experiment(
             f"{len(tasks) - len(todo)} already done, {len(todo)} to run"
         )
         t1 = time.perf_counter()
-        e = execute(_order(todo), store, workers, scheduler, runner, progress=progress)
+        e = execute(
+            _order(todo),
+            store,
+            workers,
+            scheduler,
+            runner,
+            progress=progress,
+            share_drives=share_drives,
+        )
         return RunSummary(
             output_dir=plan.output_dir,
             total=len(tasks),

@@ -1,7 +1,8 @@
-"""The worker side of a run: what a process executes for one episode (:func:`run_task`), with the
-town's simulator and the last localizer kept per process, so that consecutive episodes skip the
-scene build and the map load; and how a pool worker starts (one thread each, ignoring Ctrl-C,
-stopping itself when its driver dies)."""
+"""The worker side of a run: what a process executes for a job (:func:`run_job`: one episode, or
+the recall episodes of one setup on a shared drive), with the town's simulator and the last job's
+localizers kept per process, so that consecutive episodes skip the scene build and the map load;
+and how a pool worker starts (one thread each, ignoring Ctrl-C, stopping itself when its driver
+dies)."""
 
 from __future__ import annotations
 
@@ -9,6 +10,8 @@ import os
 import signal
 import threading
 import time
+import traceback
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -18,6 +21,7 @@ from vlocbench.bench.experiment import EpisodeTask
 from vlocbench.bench.localizer import Localizer
 from vlocbench.bench.methods import MethodContext, build_localizer
 from vlocbench.bench.records import EpisodeResult
+from vlocbench.bench.shared_drive import can_share, run_shared_drive
 from vlocbench.bench.towns import route_named, town_named
 from vlocbench.config import config_hash
 from vlocbench.sim import Simulator
@@ -25,13 +29,39 @@ from vlocbench.sim import Simulator
 
 @dataclass(frozen=True)
 class EpisodeOutcome:
+    """An episode's result, or the traceback of what it raised."""
+
     key: str
-    result: EpisodeResult
-    wall_s: float  # in the worker, town and map loading included
+    result: EpisodeResult | None
+    wall_s: float  # in the worker: its share of the town's and its map's loading included
+    error: str | None = None
+
+
+Job = tuple[EpisodeTask, ...]  # episodes a worker runs together
+
+
+def jobs_of(tasks: Sequence[EpisodeTask], share_drives: bool = True) -> list[Job]:
+    """``tasks`` as jobs, in order: the recall episodes of several methods in one setup share a
+    drive (:mod:`vlocbench.bench.shared_drive`) and make one job where the first of them was;
+    every other episode is a job of its own."""
+    jobs: dict[Any, list[EpisodeTask]] = {}
+    for task in tasks:
+        shared = share_drives and task.kind == "recall" and can_share(task.episode)
+        group = (
+            (
+                task.town,
+                task.route_length_m,
+                config_hash((task.setup.conditions, task.setup.cameras, task.episode)),
+            )
+            if shared
+            else task.key
+        )
+        jobs.setdefault(group, []).append(task)
+    return [tuple(job) for job in jobs.values()]
 
 
 _SIM: dict[tuple[str, Any], Simulator] = {}
-_LOCALIZER: dict[str, Localizer] = {}
+_LOCALIZERS: dict[str, Localizer] = {}
 
 
 def _simulator(task: EpisodeTask) -> Simulator:
@@ -48,33 +78,90 @@ def _simulator(task: EpisodeTask) -> Simulator:
     return sim
 
 
+def _localizer_key(task: EpisodeTask) -> str:
+    return config_hash((task.method, task.map_dir, task.setup.cameras))
+
+
 def _localizer(task: EpisodeTask) -> Localizer | None:
-    """The last localizer of this process, rebuilt only when method, map or rig change."""
+    """The job's localizer for ``task``, kept from the last job when method, map and rig match."""
     if task.method is None:
         return None
-    key = config_hash((task.method, task.map_dir, task.setup.cameras))
-    if key not in _LOCALIZER:
-        for old in _LOCALIZER.values():
-            old.close()
-        _LOCALIZER.clear()
+    key = _localizer_key(task)
+    if key not in _LOCALIZERS:
         context = MethodContext(
             name=task.method.name,
             cameras=tuple(task.setup.cameras),
             town=task.town,
             map_dir=Path(task.map_dir) if task.map_dir else None,
         )
-        _LOCALIZER[key] = build_localizer(task.method, context)
-    return _LOCALIZER[key]
+        _LOCALIZERS[key] = build_localizer(task.method, context)
+    return _LOCALIZERS[key]
 
 
-def run_task(task: EpisodeTask) -> EpisodeOutcome:
-    """Run one episode in this process (the function workers execute)."""
+def _keep_localizers(job: Job) -> None:
+    """Close the localizers the last job held that this one does not use."""
+    keep = {_localizer_key(t) for t in job if t.method is not None}
+    for key in [k for k in _LOCALIZERS if k not in keep]:
+        _LOCALIZERS.pop(key).close()
+
+
+def _run_task(task: EpisodeTask) -> EpisodeOutcome:
+    """Run one episode in this process; what it raises propagates."""
     t = time.perf_counter()
+    _keep_localizers((task,))
     localizer = _localizer(task)
     result = run_episode(
         _simulator(task), route_named(task.town, task.route_length_m), localizer, task.episode
     )
     return EpisodeOutcome(task.key, result, time.perf_counter() - t)
+
+
+def run_job(job: Job) -> list[EpisodeOutcome]:
+    """Run a job's episodes in this process (the function workers execute): each outcome holds
+    its result or, where its episode raised, the traceback."""
+    if len(job) == 1:
+        try:
+            return [_run_task(job[0])]
+        except Exception as exc:
+            return [_failed(job[0], exc, 0.0)]
+    return _run_shared(job)
+
+
+def _run_shared(job: Job) -> list[EpisodeOutcome]:
+    """Recall episodes of one setup: those whose localizers ask for the same cameras share a
+    drive."""
+    t0 = time.perf_counter()
+    _keep_localizers(job)
+    first = job[0]
+    sim = _simulator(first)
+    path = route_named(first.town, first.route_length_m)
+    setup_s = time.perf_counter() - t0  # the town's share, charged to the first drive's lead
+    outcomes: dict[str, EpisodeOutcome] = {}
+    drives: dict[tuple[Any, ...], list[tuple[EpisodeTask, Localizer, float]]] = {}
+    for task in job:
+        t = time.perf_counter()
+        try:
+            localizer = _localizer(task)
+        except Exception as exc:
+            outcomes[task.key] = _failed(task, exc, time.perf_counter() - t)
+            continue
+        assert localizer is not None  # recall episodes have a method
+        built_s = time.perf_counter() - t
+        drives.setdefault(tuple(localizer.cameras), []).append((task, localizer, built_s))
+    for members in drives.values():
+        results = run_shared_drive(sim, path, [loc for _, loc, _ in members], first.episode)
+        for (task, _, built_s), result in zip(members, results):
+            wall_s = built_s + setup_s
+            setup_s = 0.0
+            if isinstance(result, Exception):
+                outcomes[task.key] = _failed(task, result, wall_s)
+            else:
+                outcomes[task.key] = EpisodeOutcome(task.key, result, wall_s + result.wall_time_s)
+    return [outcomes[task.key] for task in job]
+
+
+def _failed(task: EpisodeTask, exc: Exception, wall_s: float) -> EpisodeOutcome:
+    return EpisodeOutcome(task.key, None, wall_s, "".join(traceback.format_exception(exc, limit=8)))
 
 
 # a pool worker's thread pools: one thread each (OpenMP for torch, MKL, Mesa's llvmpipe renderer),

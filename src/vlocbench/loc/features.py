@@ -7,6 +7,11 @@ live in :mod:`vlocbench.loc.learned` (PyTorch, imported only when used).
 
 from __future__ import annotations
 
+import hashlib
+import time
+from collections import OrderedDict
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
@@ -59,6 +64,50 @@ def check_image(image: object, what: str = "image") -> NDArray[np.uint8]:
     if min(image.shape[:2]) < 16:
         raise LocalizationError(f"{what}: {image.shape[1]}x{image.shape[0]} is too small")
     return np.ascontiguousarray(image)
+
+
+# inside shared_extraction(): (extractor preset, image digest) -> (features, seconds they took),
+# the last SHARED_IMAGES images
+_SHARED: OrderedDict[tuple[str, bytes], tuple[Features, float]] | None = None
+SHARED_IMAGES = 4
+
+
+@contextmanager
+def shared_extraction() -> Iterator[None]:
+    """Within it, :func:`extract_timed` extracts an image's features once per extractor preset:
+    localizers that see the same images at once (recall drives that share a drive) and use the
+    same extractor pay for it once."""
+    global _SHARED
+    outer, _SHARED = _SHARED, OrderedDict()
+    try:
+        yield
+    finally:
+        _SHARED = outer
+
+
+def extract_timed(
+    extractor: FeatureExtractor, preset: str, image: NDArray[np.uint8]
+) -> tuple[Features, float, float]:
+    """``(features, seconds, shared_s)``: the features of ``image`` by ``extractor`` (made from
+    ``preset``), the seconds their extraction took, and of those the seconds another caller spent
+    (all of them when :func:`shared_extraction` had them, else 0)."""
+    if _SHARED is None:
+        t = time.perf_counter()
+        return extractor.extract(image), time.perf_counter() - t, 0.0
+    digest = hashlib.blake2b(image.data, digest_size=16)
+    digest.update(str(image.shape).encode())
+    key = (preset, digest.digest())
+    if key in _SHARED:
+        _SHARED.move_to_end(key)
+        feats, seconds = _SHARED[key]
+        return feats, seconds, seconds
+    t = time.perf_counter()
+    feats = extractor.extract(image)
+    seconds = time.perf_counter() - t
+    _SHARED[key] = (feats, seconds)
+    if len(_SHARED) > SHARED_IMAGES:
+        _SHARED.popitem(last=False)
+    return feats, seconds, 0.0
 
 
 def _gray(image: NDArray[np.uint8]) -> NDArray[np.uint8]:

@@ -9,6 +9,7 @@ fall-back to the retrieved image's pose (``fallback_to_retrieval`` makes that ex
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -20,7 +21,7 @@ from numpy.typing import NDArray
 from vlocbench.config import ADDED_OPTION, require
 from vlocbench.errors import LocalizationError, UnknownNameError
 from vlocbench.geometry import invert_pose, skew
-from vlocbench.loc.features import Features, check_image
+from vlocbench.loc.features import Features, check_image, extract_timed
 from vlocbench.loc.gallery import CameraModel
 from vlocbench.loc.mapping import FeatureStore, colmap_camera, map_info, pose_of, rigid_of
 from vlocbench.loc.native import pycolmap, quiet_pycolmap
@@ -121,6 +122,9 @@ class QueryResult:
     seconds: dict[str, float] = field(default_factory=dict)
     reason: str = ""
     fallback: bool = False
+    # of ``seconds``, those another localizer spent for this one (features extracted once for
+    # localizers that share a drive and an extractor: features.shared_extraction)
+    shared_s: float = 0.0
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -140,6 +144,11 @@ class RigResult:
     @property
     def generalized(self) -> bool:
         return self.success and self.camera < 0
+
+    @property
+    def shared_s(self) -> float:
+        """Of ``seconds``, those another localizer spent (see :attr:`QueryResult.shared_s`)."""
+        return sum(r.shared_s for r in self.cameras)
 
 
 @dataclass(frozen=True)
@@ -261,15 +270,28 @@ class MapLocalizer:
         prior_world_from_cam: NDArray[np.float64] | None,
     ) -> tuple[QueryResult, _Correspondences | None]:
         """The result, and the 2D-3D correspondences of the winning cluster (None without one)."""
-        c, seconds = self.config, {}
+        seconds: dict[str, float] = {}
         image = check_image(image, "query image")
         if image.shape[:2] != (camera.height, camera.width):
             raise LocalizationError(
                 f"query image is {image.shape[1]}x{image.shape[0]}, its camera {camera.width}x{camera.height}"
             )
-        t = time.perf_counter()
-        feats = self.extractor.extract(image)
-        seconds["features"] = time.perf_counter() - t
+        feats, seconds["features"], shared_s = extract_timed(
+            self.extractor, self.method.features, image
+        )
+        result, corr = self._answer(image, feats, camera, prior_world_from_cam, seconds)
+        return (dataclasses.replace(result, shared_s=shared_s) if shared_s else result), corr
+
+    def _answer(
+        self,
+        image: NDArray[np.uint8],
+        feats: Features,
+        camera: CameraModel,
+        prior_world_from_cam: NDArray[np.float64] | None,
+        seconds: dict[str, float],
+    ) -> tuple[QueryResult, _Correspondences | None]:
+        """:meth:`_solve` once the image's features are there."""
+        c = self.config
         t = time.perf_counter()
         ranked = self._retrieve(image, feats, prior_world_from_cam)
         retrieved = ranked[: c.top_k]
