@@ -200,7 +200,9 @@ def _run(args: argparse.Namespace) -> int:
     from vlocbench.bench.runner import run_experiment
     from vlocbench.bench.worker import default_workers
 
-    plan = load_experiment(args.experiment).only(args.towns or (), args.methods or ())
+    plan = load_experiment(args.experiment).only(
+        args.towns or (), args.methods or (), args.kinds or ()
+    )
     if args.output:
         plan = plan.with_output(args.output)
     summary = run_experiment(
@@ -692,6 +694,12 @@ def _add_experiment_verbs(sub: Any, shared: dict[str, argparse.ArgumentParser]) 
         type=_names,
         help="only these of its methods (comma-separated); a later run of the whole "
         "experiment reuses their episodes",
+    )
+    p.add_argument(
+        "--kinds",
+        type=_names,
+        help="only these kinds of its episodes (comma-separated: recall, failure, baseline), "
+        "e.g. the recall drives of a long sweep first",
     )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--no-report", action="store_true", help="skip the report")

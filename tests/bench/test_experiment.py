@@ -123,6 +123,17 @@ def test_part_of_a_plan_keeps_its_episode_keys():
         whole.only(methods=["sift-gem"])
     with pytest.raises(UnknownNameError, match="unknown town 'town02'; valid: town01, town10"):
         whole.only(towns=["town02"])
+    drives = whole.only(methods=["sift"], kinds=["recall", "baseline"]).tasks()
+    assert {t.kind for t in drives} == {"recall", "baseline"}
+    assert {t.key for t in drives} == {
+        t.key
+        for t in whole.tasks()
+        if t.kind == "baseline" or (t.method_name == "sift" and t.kind == "recall")
+    }
+    with pytest.raises(UnknownNameError, match="valid: baseline, failure, recall"):
+        whole.only(kinds=["recalls"])
+    with pytest.raises(UnknownNameError, match="unknown episode kind 'baseline'"):
+        whole.only(kinds=["recall"]).only(kinds=["baseline"])  # not in the part
 
 
 def test_episode_settings_sweep_as_setups():

@@ -29,7 +29,7 @@ from typing import Any
 
 from vlocbench.bench.episode import EPISODE_VERSION, EpisodeConfig
 from vlocbench.bench.methods import MethodSpec
-from vlocbench.bench.records import EpisodeKind
+from vlocbench.bench.records import EPISODE_KINDS, EpisodeKind
 from vlocbench.bench.towns import route_named
 from vlocbench.config import config_hash, from_dict, load_yaml, require, to_dict
 from vlocbench.errors import ConfigError, UnknownNameError
@@ -254,11 +254,19 @@ class ExperimentPlan:
         """The same plan writing its results to ``output``."""
         return dataclasses.replace(self, spec=dataclasses.replace(self.spec, output=str(output)))
 
-    def only(self, towns: Sequence[str] = (), methods: Sequence[str] = ()) -> ExperimentPlan:
-        """The part of the plan in ``towns`` and with ``methods`` (empty: all of them). Its
-        episodes keep their keys, so a later run of the whole plan reuses them."""
+    def only(
+        self, towns: Sequence[str] = (), methods: Sequence[str] = (), kinds: Sequence[str] = ()
+    ) -> ExperimentPlan:
+        """The part of the plan in ``towns``, with ``methods`` and of the episode ``kinds``
+        (recall, failure, baseline; empty: all of them). Its episodes keep their keys, so a later
+        run of the whole plan reuses them."""
         s = self.spec
-        choices = {"town": (towns, s.towns), "method": (methods, [m.name for m in s.methods])}
+        planned = [k for k in EPISODE_KINDS if getattr(s, k)]
+        choices = {
+            "town": (towns, s.towns),
+            "method": (methods, [m.name for m in s.methods]),
+            "episode kind": (kinds, planned),
+        }
         for kind, (names, valid) in choices.items():
             for name in names:
                 if name not in valid:
@@ -267,6 +275,9 @@ class ExperimentPlan:
             s,
             towns=tuple(t for t in s.towns if not towns or t in towns),
             methods=tuple(m for m in s.methods if not methods or m.name in methods),
+            recall=s.recall and (not kinds or "recall" in kinds),
+            failure=s.failure and (not kinds or "failure" in kinds),
+            baseline=s.baseline and (not kinds or "baseline" in kinds),
         )
         return dataclasses.replace(self, spec=part)
 
