@@ -419,10 +419,17 @@ def ground_tile_m(kind: str) -> float:
     return GROUND_TILE_M.get(kind, 4.0)
 
 
+# the leaves of every crown, one tile around a crown (meshes.blob): drawn as a 4 m ground tile
+# wrapped 27 times around each crown, all crowns alike, their repeats left SIFT's ratio test nothing
+# to match on a crown (docs/reproduction.md, scene 9)
+LEAVES_TILE_PX = 2048
+
+
 def ground(kind: str, rng: np.random.Generator, snow: float = 0.0) -> Image:
     """A tile of grass, sand, water, roof gravel, bark, leaves or concrete of 64 px a metre over
-    :func:`ground_tile_m` (grass 16 m, the others 4 m; the scene stretches water's over 8 m)."""
-    size = round(64 * ground_tile_m(kind))
+    :func:`ground_tile_m` (grass 16 m, the others 4 m; the scene stretches water's over 8 m);
+    leaves :data:`LEAVES_TILE_PX` square, laid over crowns at their own scale."""
+    size = LEAVES_TILE_PX if kind == "leaves" else round(64 * ground_tile_m(kind))
     colors = {
         "grass": (75, 120, 50),
         "autumn_grass": (120, 115, 60),
@@ -439,7 +446,7 @@ def ground(kind: str, rng: np.random.Generator, snow: float = 0.0) -> Image:
     img += noise((size, size), rng, 8, amp)[..., None]
     img += noise((size, size), rng, 40, amp)[..., None]
     if kind == "leaves":
-        for _ in range(900):
+        for _ in range(round(900 * (size / 256) ** 2)):
             x, y = rng.integers(0, size, 2)
             cv2.circle(
                 img, (int(x), int(y)), int(rng.integers(2, 6)), _rgb(rng.uniform(90, 255, 3)), -1
