@@ -30,8 +30,7 @@ GROUP_TRAFFIC, GROUP_COLLISION, GROUP_EGO = 3, 4, 5
 NIGHT_MESHES = ("lamp_glow", "windows_lit")
 NIGHT_PARKED_Z_M = -1000.0
 LAMP_HEIGHT_M = 6.2  # the underside of a lamp's head, where its light leaves
-# the crown a leaves tile covers: 150 px a metre, as fine as the leaves were drawn before scene 9
-CROWN_TILE_M = tex.LEAVES_TILE_PX / 150
+CROWN_TILE_M = tex.LEAVES_TILE_PX / 64  # the crown a leaves tile covers
 LAMP_REACH_M = 1.7  # from the pole to the head, towards the road
 # bump when the look of the towns changes: galleries and maps (and results) are keyed by it
 # 7: window relief, shop tiles apart, paving in shifted blocks; 8: grass 16 m in blocks;
@@ -200,7 +199,7 @@ class _SceneBuilder:
         self.texture("paving", tex.paving(rng))
         self.texture("paving_winter", tex.paving(rng, snow=0.8))
         for kind in GROUND_KINDS:
-            self.texture(kind, tex.ground(kind, rng))
+            self.texture(kind, tex.foliage(rng) if kind == "leaves" else tex.ground(kind, rng))
         self.texture("snow", tex.ground("concrete", rng, snow=1.2))
         self.texture("signs", tex.sign_atlas(rng))
 
