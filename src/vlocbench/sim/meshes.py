@@ -113,36 +113,11 @@ class MeshBuilder:
         )
         self.add(verts, uv, faces)
 
-    def blob(
-        self,
-        center: Array,
-        radii: Array,
-        rng: np.random.Generator,
-        subdiv: int = 1,
-        tile_m: float = 4.0,
-    ) -> None:
-        """A lumpy ellipsoid (icosphere with radial noise), e.g. a tree crown. Its texture is
-        wrapped around it, a tile every ``tile_m`` of its surface, from a random place in the tile
-        and mirrored at random, so that no two blobs look alike."""
+    def blob(self, center: Array, radii: Array, rng: np.random.Generator, subdiv: int = 1) -> None:
+        """A lumpy ellipsoid (icosphere with radial noise), e.g. a tree crown."""
         verts, faces = icosphere(subdiv)
-        # metres along the surface (a sinusoidal projection: even where the crown curves under)
-        lat = np.arcsin(np.clip(verts[:, 2], -1, 1))
-        turn_m = 2 * np.pi * float(np.mean(radii[:2])) * np.cos(lat)  # around, at each latitude
-        around_m = np.arctan2(verts[:, 1], verts[:, 0]) / (2 * np.pi) * turn_m
-        up_m = lat * radii[2]
         verts = verts * (1 + rng.uniform(-0.12, 0.12, (len(verts), 1)))
-        # a face across the seam, where the way around jumps by a turn, takes copies of its
-        # corners on the seam's far side, one turn further on
-        corners = np.arctan2(verts[:, 1], verts[:, 0])[faces]
-        face, corner = np.nonzero(corners.max(1, keepdims=True) - corners > np.pi)
-        copied = faces[face, corner]
-        faces = faces.copy()
-        faces[face, corner] = len(verts) + np.arange(len(copied))
-        verts = np.concatenate([verts, verts[copied]])
-        around_m = np.concatenate([around_m, around_m[copied] + turn_m[copied]])
-        up_m = np.concatenate([up_m, up_m[copied]])
-        mirror = rng.choice((-1.0, 1.0))
-        uv = np.stack([mirror * around_m, up_m], 1) / tile_m + rng.uniform(0, 1, 2)
+        uv = np.stack([np.arctan2(verts[:, 1], verts[:, 0]), verts[:, 2]], 1) * 1.5
         self.add(center + verts * radii, uv, faces)
 
 

@@ -30,12 +30,10 @@ GROUP_TRAFFIC, GROUP_COLLISION, GROUP_EGO = 3, 4, 5
 NIGHT_MESHES = ("lamp_glow", "windows_lit")
 NIGHT_PARKED_Z_M = -1000.0
 LAMP_HEIGHT_M = 6.2  # the underside of a lamp's head, where its light leaves
-CROWN_TILE_M = tex.LEAVES_TILE_PX / 64  # the crown a leaves tile covers
 LAMP_REACH_M = 1.7  # from the pole to the head, towards the road
 # bump when the look of the towns changes: galleries and maps (and results) are keyed by it
-# 7: window relief, shop tiles apart, paving in shifted blocks; 8: grass 16 m in blocks;
-# 9: every crown its own cut of a large leaves tile
-SCENE_VERSION = 9
+# 7: window relief, shop tiles apart, paving in shifted blocks; 8: grass 16 m in blocks
+SCENE_VERSION = 8
 GROUND_FLOOR_M = 4.2
 GROUND_SHIFTS = 64  # the moves a ground block's texture may take, per tile (a power of two)
 LOW_WALL_M = 12.0  # walls below: vertices every cell_m (headlights), windows set back
@@ -199,7 +197,7 @@ class _SceneBuilder:
         self.texture("paving", tex.paving(rng))
         self.texture("paving_winter", tex.paving(rng, snow=0.8))
         for kind in GROUND_KINDS:
-            self.texture(kind, tex.foliage(rng) if kind == "leaves" else tex.ground(kind, rng))
+            self.texture(kind, tex.ground(kind, rng))
         self.texture("snow", tex.ground("concrete", rng, snow=1.2))
         self.texture("signs", tex.sign_atlas(rng))
 
@@ -556,13 +554,11 @@ class _SceneBuilder:
                 self.meshes["bark"].add(*_branch(start, tip, 0.06))
             center = base + np.array([0, 0, trunk_h + crown_r * 0.9])
             radii = np.array([crown_r, crown_r, crown_r * 1.1])
-            leaves = self.meshes["leaves_full"]
-            leaves.blob(center, radii, rng, tile_m=CROWN_TILE_M)
-            offset = rng.uniform(-0.6, 0.6, 3) * crown_r
-            leaves.blob(center + offset, radii * 0.7, rng, tile_m=CROWN_TILE_M)
-            self.meshes["leaves_sparse"].blob(
-                center, radii * 0.72, rng, subdiv=0, tile_m=CROWN_TILE_M
+            self.meshes["leaves_full"].blob(center, radii, rng)
+            self.meshes["leaves_full"].blob(
+                center + rng.uniform(-0.6, 0.6, 3) * crown_r, radii * 0.7, rng
             )
+            self.meshes["leaves_sparse"].blob(center, radii * 0.72, rng, subdiv=0)
             self.collide_cylinder("tree", f"tree {k}", x, y, 0.3, 3.0)
         for k, (x, y, yaw) in enumerate(town.lamps):
             base = np.array([x, y, 0.0])

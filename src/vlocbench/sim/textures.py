@@ -419,35 +419,8 @@ def ground_tile_m(kind: str) -> float:
     return GROUND_TILE_M.get(kind, 4.0)
 
 
-# the leaves of every crown, 64 px a metre of crown, one tile about once around a crown
-# (meshes.blob): drawn before scene 9 as a pale, fine 4 m tile wrapped 27 times around every crown
-# alike, which a camera a few metres off saw as a smooth green ball
-LEAVES_TILE_PX = 1024
-
-
-def foliage(rng: np.random.Generator) -> Image:
-    """Leaves: clusters of leaves, in the light and in the shade, with dark gaps into the crown
-    between them, :data:`LEAVES_TILE_PX` square at 64 px a metre of crown, tinted by the
-    material (season)."""
-    size = LEAVES_TILE_PX
-    img = np.full((size, size, 3), 90, np.float32) + noise((size, size), rng, 32, 25)[..., None]
-    lit = noise((size, size), rng, 64, 0.35) + 0.65  # whole parts of a crown in the light
-    # clusters 15-45 cm across, then single leaves 6-12 cm long over them (the lit ones clip white)
-    for count, length_px, shade in ((4000, (5, 14), (190, 300)), (20000, (2, 4), (220, 320))):
-        xs, ys = rng.integers(0, size, (2, count))
-        lengths = rng.uniform(*length_px, count)
-        widths = lengths * rng.uniform(0.45, 0.8, count)
-        angles = rng.uniform(0, 180, count)
-        shades = rng.uniform(*shade, count) * lit[ys, xs]
-        hues = rng.uniform(0.92, 1.08, (count, 3))
-        for x, y, a, b, angle, grey, hue in zip(xs, ys, lengths, widths, angles, shades, hues):
-            center, axes = (int(x), int(y)), (round(a), max(1, round(b)))
-            cv2.ellipse(img, center, axes, float(angle), 0, 360, _rgb(grey * hue), -1)
-    return _finish(img, rng, 6)
-
-
 def ground(kind: str, rng: np.random.Generator, snow: float = 0.0) -> Image:
-    """A tile of grass, sand, water, roof gravel, bark or concrete of 64 px a metre over
+    """A tile of grass, sand, water, roof gravel, bark, leaves or concrete of 64 px a metre over
     :func:`ground_tile_m` (grass 16 m, the others 4 m; the scene stretches water's over 8 m)."""
     size = round(64 * ground_tile_m(kind))
     colors = {
@@ -457,13 +430,20 @@ def ground(kind: str, rng: np.random.Generator, snow: float = 0.0) -> Image:
         "water": (50, 95, 130),
         "roof": (95, 92, 90),
         "bark": (85, 65, 45),
+        "leaves": (200, 200, 200),  # tinted by the material colour (season)
         "concrete": (170, 168, 160),
         "metal": (90, 95, 100),
     }
     img = np.ones((size, size, 3), np.float32) * np.array(colors[kind], np.float32)
-    amp = {"water": 8, "grass": 22}.get(kind, 16)
+    amp = {"water": 8, "leaves": 45, "grass": 22}.get(kind, 16)
     img += noise((size, size), rng, 8, amp)[..., None]
     img += noise((size, size), rng, 40, amp)[..., None]
+    if kind == "leaves":
+        for _ in range(900):
+            x, y = rng.integers(0, size, 2)
+            cv2.circle(
+                img, (int(x), int(y)), int(rng.integers(2, 6)), _rgb(rng.uniform(90, 255, 3)), -1
+            )
     return _snow(_finish(img, rng, 8), rng, snow)
 
 
