@@ -3,8 +3,9 @@ a recall-only experiment with two methods, each drive shared or driven alone.
 
     python benchmarks/bench_shared_drive.py [--repeats 3] [--workers 1] [--out out/bench_shared_drive]
 
-The experiment is fixed: the first 150 m of town10's route at 800x600, ``sift`` and a gated
-``sift`` (``localizer.min_inliers: 12``), k in {0, 8}, recall episodes only (4 in all). Its
+The experiment is fixed: the first 150 m of town10's route at 800x600, the demo's methods
+(``sift``, and ``sift`` gated at ``localizer.min_inliers: 12``), k in {0, 8}, recall episodes only
+(4 in all). Its
 gallery and map are built once (a warm-up run) and reused; each timed run starts from an empty
 store; shared and alone alternate. Prints the median episode-phase time of each way, the saving,
 and whether both stored the same results.
@@ -20,21 +21,15 @@ from pathlib import Path
 from vlocbench.bench.experiment import load_experiment
 from vlocbench.bench.runner import run_experiment
 from vlocbench.bench.store import ResultStore
+from vlocbench.config import load_yaml
+
+DEMO = Path(__file__).parents[1] / "experiments" / "demo.yaml"
 
 EXPERIMENT = {
     "name": "bench_shared_drive",
     "towns": ["town10"],
     "route_length_m": 150,
-    "methods": [
-        "sift",
-        {
-            "name": "sift-gated",
-            "features": "sift",
-            "matcher": "nn-ratio",
-            "retrieval": "vlad",
-            "localizer": {"min_inliers": 12},
-        },
-    ],
+    "methods": load_yaml(DEMO)["methods"],  # sift, and sift gated at 12 inliers
     "sweep": {"illumination.k": [0, 8]},
     "repetitions": 1,
     "failure": False,
