@@ -80,8 +80,8 @@ class _SimLog:
         self.first = done
 
 
-class _LeadSim:
-    """The real simulator, each answer logged for the followers."""
+class _SharedSim:
+    """An episode's view of the shared simulator: its step and vehicle are the real one's."""
 
     def __init__(self, sim: Simulator, log: _SimLog) -> None:
         self.sim, self.log = sim, log
@@ -93,6 +93,10 @@ class _LeadSim:
     @property
     def params(self) -> VehicleParams:
         return self.sim.params
+
+
+class _LeadSim(_SharedSim):
+    """The real simulator, each answer logged for the followers."""
 
     @property
     def state(self) -> VehicleState:
@@ -117,19 +121,12 @@ class _LeadSim:
         return _copies(frames) if self.log.cursors else frames
 
 
-class _FollowSim:
+class _FollowSim(_SharedSim):
     """A follower's simulator: the lead's answers, read from the log in the lead's order."""
 
-    def __init__(self, lead: Simulator, log: _SimLog, follower: int) -> None:
-        self.lead, self.log, self.follower = lead, log, follower
-
-    @property
-    def dt_s(self) -> float:
-        return self.lead.dt_s
-
-    @property
-    def params(self) -> VehicleParams:
-        return self.lead.params
+    def __init__(self, sim: Simulator, log: _SimLog, follower: int) -> None:
+        super().__init__(sim, log)
+        self.follower = follower
 
     def _read(self, call: str, *args: Any) -> Any:
         return self.log.read(self.follower, call, args)
