@@ -54,9 +54,10 @@ def test_a_sweep_run_in_parts_is_reported_whole(tmp_path, capsys):
         assert cell is not None and cell.failure is not None and cell.recall is not None, label
         assert cell.keys <= {t.key for t in planned}  # none of the other gallery's
     assert "5 of 5 episodes" in files.html.read_text()
-    # the paper's illumination curves of town10 and ours in the same axes
-    beside = files.html.parent / "failure_rate_town10_paper.png"
-    assert beside in files.figures and beside.read_bytes()[:4] == b"\x89PNG"
+    # the paper's illumination curves of town10 and ours in the same axes: F, and T1 recall
+    for name in ("failure_rate_town10_paper.png", "recall_town10_paper.png"):
+        beside = files.html.parent / name
+        assert beside in files.figures and beside.read_bytes()[:4] == b"\x89PNG"
 
     assert (
         main(["report", str(tmp_path), "--experiment", str(tmp_path / "ill.yaml"), "--no-examples"])

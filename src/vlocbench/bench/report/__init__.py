@@ -21,6 +21,7 @@ from vlocbench.bench.report.figures import (
     failure_figure,
     failure_vs_recall_figure,
     paper_failure_figure,
+    paper_recall_figure,
     requirements_figure,
 )
 from vlocbench.bench.report.page import write_page
@@ -253,9 +254,11 @@ def _write_figures(summary: Summary, out: Path, drives: DriveFigures) -> list[Pa
         figures.append(
             crash_sites_figure(summary, town, town_named(town), out / f"failure_sites_{name}.png")
         )
-        beside = paper_failure_figure(summary, town, out / f"failure_rate_{name}_paper.png")
-        if beside is not None:
-            figures.append(beside)
+        beside = (
+            paper_failure_figure(summary, town, out / f"failure_rate_{name}_paper.png"),
+            paper_recall_figure(summary, town, out / f"recall_{name}_paper.png"),
+        )
+        figures.extend(f for f in beside if f is not None)
     if summary.spec.methods:
         if summary.spec.recall and summary.spec.failure:
             figures.append(failure_vs_recall_figure(summary, out / "failure_vs_recall.png"))

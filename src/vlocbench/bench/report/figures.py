@@ -1,5 +1,6 @@
 """The report's figures (PNG, matplotlib's Agg): failure rate against the swept level with the
-odometry line, failure rate against recall (the paper's Fig. 5), failure sites on the town map (its
+odometry line, beside the paper's published curves (F, and T1 recall against the light), failure
+rate against recall (the paper's Fig. 5), failure sites on the town map (its
 Fig. 6), computation time per method."""
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ import numpy as np
 from vlocbench.bench.consistency import ConfidenceCurve
 from vlocbench.bench.metrics import FailureRate
 from vlocbench.bench.paper import paper_results
-from vlocbench.bench.report.comparison import level_text, paper_axis
+from vlocbench.bench.report.comparison import level_text, ours_per_setup, paper_axis
 from vlocbench.bench.report.tables import setup_header
 from vlocbench.bench.requirements import MeasuredAccuracy, OracleSweep
 from vlocbench.bench.summary import BASELINE, Summary
@@ -78,6 +79,30 @@ def failure_figure(summary: Summary, town: str, path: Path) -> Path:
     return _save(fig, path)
 
 
+def _paper_curves(
+    ax: plt.Axes, x: Sequence[float], curves: Mapping[str, Sequence[float]], ours: Sequence[str]
+) -> None:
+    """The paper's methods dashed, those with the local features of one of ours stand out."""
+    named = " ".join(ours).lower()
+    for (method, values), color in zip(curves.items(), PAPER_COLORS * 4):
+        same = method.split(" + ")[-1].lower() in named
+        ax.plot(
+            x,
+            values,
+            "--",
+            color=color,
+            lw=2.0 if same else 1.0,
+            alpha=1.0 if same else 0.6,
+            label=f"paper: {method}",
+        )
+
+
+def _finish_beside(ax: plt.Axes, title: str) -> None:
+    ax.set_title(title)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+
+
 def paper_failure_figure(summary: Summary, town: str, path: Path) -> Path | None:
     """F against the paper's levels: ours (solid, 95 % intervals) and the paper's published curves
     (dashed) in the same axes, with both odometry lines; None when the run sweeps no factor of the
@@ -90,19 +115,7 @@ def paper_failure_figure(summary: Summary, town: str, path: Path) -> Path | None
     paper = paper_results()
     x = np.arange(len(table.levels))
     fig, ax = plt.subplots(figsize=(9.5, 4.2))
-    ours = " ".join(summary.methods).lower()
-    for (method, f), color in zip(table.failure_rate[name].items(), PAPER_COLORS * 4):
-        # the paper's methods with the local features of one of ours stand out
-        same = method.split(" + ")[-1].lower() in ours
-        ax.plot(
-            x,
-            f,
-            "--",
-            color=color,
-            lw=2.0 if same else 1.0,
-            alpha=1.0 if same else 0.6,
-            label=f"paper: {method}",
-        )
+    _paper_curves(ax, x, table.failure_rate[name], summary.methods)
     ax.axhline(
         paper.odometry_failure_rate[name], ls=":", color="0.5", lw=1.2, label="paper: odometry only"
     )
@@ -144,9 +157,36 @@ def paper_failure_figure(summary: Summary, town: str, path: Path) -> Path | None
     )
     ax.set_ylabel("failure rate F (1/km)")
     ax.set_ylim(bottom=0)
-    ax.set_title(f"{name}: failure rate, vlocbench (solid) and the paper (dashed)")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+    _finish_beside(ax, f"{name}: failure rate, vlocbench (solid) and the paper (dashed)")
+    return _save(fig, path)
+
+
+def paper_recall_figure(summary: Summary, town: str, path: Path) -> Path | None:
+    """T1 recall of the ground-truth drives against the illumination level k: ours (solid, every
+    level the run has) and the paper's Table 5 (dashed, its levels 0, 2, ..., 10); None when the
+    run does not sweep k, has no recall drive in this town, or the paper has no table for it."""
+    found = paper_axis(summary)
+    name = summary.town_names[town]
+    if found is None or name not in found[0].recall_t1:
+        return None
+    table, ours_levels = found
+    ours = {}
+    for method in summary.methods:
+        t1 = ours_per_setup(summary, town, method)[1]
+        pts = sorted((lv, v) for lv, v in zip(ours_levels, t1) if lv is not None and np.isfinite(v))
+        if pts and method != BASELINE:
+            ours[method] = pts
+    if not ours:
+        return None
+    fig, ax = plt.subplots(figsize=(9.5, 4.2))
+    _paper_curves(ax, table.recall_levels, table.recall_t1[name], summary.methods)
+    for (method, pts), color in zip(ours.items(), COLORS * 4):
+        ax.plot(*zip(*pts), "o-", color=color, lw=2, label=method)
+    ax.set_xticks(sorted({*table.recall_levels, *(lv for p in ours.values() for lv, _ in p)}))
+    ax.set_xlabel("illumination level k")
+    ax.set_ylabel("T1 recall (%), (0.25 m, 2 deg)")
+    ax.set_ylim(0, 101)
+    _finish_beside(ax, f"{name}: T1 recall, vlocbench (solid) and the paper (dashed)")
     return _save(fig, path)
 
 
