@@ -71,3 +71,7 @@ def test_a_requirements_run_places_a_real_method_on_the_oracle_sweep(tiny, tmp_p
     [row] = [r for r in section.splitlines() if r.startswith("| sift | ")]
     sigma = float(row.split("|")[2])
     assert 0 < sigma < 1  # it localizes on its own map, to well under a metre
+    # the verdict runs over the swept oracle; sift, the same episodes at every sigma, has no line
+    verdict = md.split("**small: verdict, over methods.oracle.args.position_sigma_m")[1]
+    verdict = verdict.split("\n\n**")[0]
+    assert "| oracle | " in verdict and "| sift | " not in verdict
