@@ -72,6 +72,29 @@ def test_six_dof_errors_and_confident_wrong_answers():
     assert np.isnan(confident_wrong(np.array([]), np.array([])))
 
 
+def test_wrong_answers_the_ekf_took_and_those_the_retrieval_caused():
+    """Of 10 answers on 100 m: 4 wrong (one by rotation alone), 2 of them fused; 3 of the wrong
+    had a retrieval, one of those with an image within 10 m."""
+    result = synthetic_result(failures=0, queries=10)
+    wrong = {
+        0: dict(position_error_3d_m=30.0, fused=True, retrieval_distances_m=(40.0, 12.0)),
+        1: dict(rotation_error_deg=15.0, fused=False, retrieval_distances_m=(30.0, 3.0)),
+        2: dict(position_error_3d_m=6.0, fused=True),
+        3: dict(position_error_3d_m=80.0, fused=False, retrieval_distances_m=(90.0,)),
+        4: dict(position_error_3d_m=4.0, retrieval_distances_m=(50.0,)),  # not beyond 5 m
+        5: dict(success=False, position_error_3d_m=float("nan"), fused=None),
+    }
+    locs = tuple(
+        dataclasses.replace(x, **wrong.get(k, {})) for k, x in enumerate(result.localizations)
+    )
+    m = episode_metrics(dataclasses.replace(result, localizations=locs))
+    assert m.extra["wrong_fused_per_km"] == pytest.approx(20.0)  # 2 over 0.1 km
+    assert m.extra["wrong_place_missed_share"] == pytest.approx(2 / 3)
+    right = episode_metrics(synthetic_result(failures=0, queries=10))
+    assert right.extra["wrong_fused_per_km"] == 0.0
+    assert np.isnan(right.extra["wrong_place_missed_share"])
+
+
 def test_failure_rate_by_cause_adds_up_to_f():
     causes = [("collision", "collision"), ("collision", "timeout"), ()]
     covered = [500.0, 250.0, 500.0]

@@ -24,6 +24,7 @@ from vlocbench.bench.records import (
     WRONG_THRESHOLD,
     EpisodeKind,
     EpisodeResult,
+    LocalizationRecord,
     localization_columns,
     per_km,
 )
@@ -284,6 +285,52 @@ declare_metric(
         name="final_drift_m",
         episode=lambda r: r.final_drift_m,
         header="EKF error at the goal (m)",
+        digits=2,
+    )
+)
+
+
+def _wrong_answers(result: EpisodeResult) -> list[LocalizationRecord]:
+    """The answers beyond WRONG_THRESHOLD (6-DoF), as :func:`confident_wrong` counts them."""
+    pos, rot = WRONG_THRESHOLD
+    return [
+        x
+        for x in result.localizations
+        if x.success and (x.position_error_3d_m > pos or abs(x.rotation_error_deg) > rot)
+    ]
+
+
+def _wrong_fused_per_km(result: EpisodeResult) -> float:
+    """Wrong answers the EKF took (its gate let them through), per km of route covered: what
+    moves the filter off the truth, where a wrong answer it rejects costs nothing."""
+    fused = sum(1 for x in _wrong_answers(result) if x.fused)
+    return per_km(fused, result.route_covered_m) if result.localizations else float("nan")
+
+
+def _wrong_place_missed_share(result: EpisodeResult, radius_m: float = 10.0) -> float:
+    """Of the wrong answers, the share whose retrieval found no image within ``radius_m``: the
+    retrieval's misses; the rest went wrong in matching and PnP with the place in hand. NaN with
+    no wrong answer or no retrieval."""
+    ranked = [x for x in _wrong_answers(result) if x.retrieval_distances_m]
+    if not ranked:
+        return float("nan")
+    return float(np.mean([min(x.retrieval_distances_m) > radius_m for x in ranked]))
+
+
+declare_metric(
+    Metric(
+        name="wrong_fused_per_km",
+        episode=_wrong_fused_per_km,
+        header="wrong answers (beyond 5 m, 10°) the EKF fused, per km",
+        kinds=("recall", "failure"),
+    )
+)
+declare_metric(
+    Metric(
+        name="wrong_place_missed_share",
+        episode=_wrong_place_missed_share,
+        header="wrong answers whose retrieval had no image within 10 m (share)",
+        kinds=("recall", "failure"),
         digits=2,
     )
 )
