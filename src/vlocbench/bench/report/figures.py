@@ -80,7 +80,10 @@ def failure_figure(summary: Summary, town: str, path: Path) -> Path:
 
 
 def _paper_curves(
-    ax: plt.Axes, x: Sequence[float], curves: Mapping[str, Sequence[float]], ours: Sequence[str]
+    ax: plt.Axes,
+    x: Sequence[float] | np.ndarray,
+    curves: Mapping[str, Sequence[float]],
+    ours: Sequence[str],
 ) -> None:
     """The paper's methods dashed, those with the local features of one of ours stand out."""
     named = " ".join(ours).lower()
