@@ -84,7 +84,7 @@ def main() -> None:
             for (x, y), yaw in zip(xy, yaws):
                 sim.teleport(float(x), float(y), float(yaw))
                 [frame] = sim.render([camera])
-                f = {name: e.extract(frame.image) for name, e in extractors.items()}
+                f = {preset: e.extract(frame.image) for preset, e in extractors.items()}
                 for n, d in descriptors.items():
                     assert d is not None
                     query = d.describe(frame.image, f[over[n]])

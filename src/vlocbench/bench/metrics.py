@@ -78,6 +78,19 @@ def place_recall(
     )
 
 
+def wrong_answers(
+    position_error_m: NDArray[np.float64],
+    rotation_error_deg: NDArray[np.float64],
+    threshold: tuple[float, float] = WRONG_THRESHOLD,
+) -> NDArray[np.bool_]:
+    """(N,) per query: answered with a pose beyond ``threshold`` (NaN errors: no answer, not
+    wrong)."""
+    pos = np.asarray(position_error_m, np.float64)
+    rot = np.abs(np.asarray(rotation_error_deg, np.float64))
+    answered = np.isfinite(pos) & np.isfinite(rot)
+    return answered & ((pos > threshold[0]) | (rot > threshold[1]))
+
+
 def confident_wrong(
     position_error_m: NDArray[np.float64],
     rotation_error_deg: NDArray[np.float64],
@@ -85,13 +98,9 @@ def confident_wrong(
 ) -> float:
     """Fraction of queries answered with a pose beyond ``threshold`` (NaN errors: no answer, not
     counted as wrong); NaN when there are no queries."""
-    pos = np.asarray(position_error_m, np.float64)
-    rot = np.abs(np.asarray(rotation_error_deg, np.float64))
-    if len(pos) == 0:
+    if len(position_error_m) == 0:
         return float("nan")
-    answered = np.isfinite(pos) & np.isfinite(rot)
-    wrong = answered & ((pos > threshold[0]) | (rot > threshold[1]))
-    return float(np.mean(wrong))
+    return float(np.mean(wrong_answers(position_error_m, rotation_error_deg, threshold)))
 
 
 def drift_segments(result: EpisodeResult) -> tuple[tuple[float, float, float], ...]:
@@ -292,12 +301,10 @@ declare_metric(
 
 def _wrong_answers(result: EpisodeResult) -> list[LocalizationRecord]:
     """The answers beyond WRONG_THRESHOLD (6-DoF), as :func:`confident_wrong` counts them."""
-    pos, rot = WRONG_THRESHOLD
-    return [
-        x
-        for x in result.localizations
-        if x.success and (x.position_error_3d_m > pos or abs(x.rotation_error_deg) > rot)
-    ]
+    locs = result.localizations
+    pos3d = np.array([x.position_error_3d_m for x in locs], np.float64)
+    rot = np.array([x.rotation_error_deg for x in locs], np.float64)
+    return [x for x, wrong in zip(locs, wrong_answers(pos3d, rot)) if wrong]
 
 
 def _wrong_fused_per_km(result: EpisodeResult) -> float:

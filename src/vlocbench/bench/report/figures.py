@@ -174,10 +174,10 @@ def paper_recall_figure(summary: Summary, town: str, path: Path) -> Path | None:
         return None
     table, ours_levels = found
     ours = {}
-    for method in summary.methods:
+    for method in (m for m in summary.methods if m != BASELINE):
         t1 = ours_per_setup(summary, town, method)[1]
         pts = sorted((lv, v) for lv, v in zip(ours_levels, t1) if lv is not None and np.isfinite(v))
-        if pts and method != BASELINE:
+        if pts:
             ours[method] = pts
     if not ours:
         return None
