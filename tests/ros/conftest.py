@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
 import time
+from pathlib import Path
 
 import pytest
 
@@ -36,3 +40,18 @@ def spin_until(executor, condition, timeout_s: float = 30.0) -> None:
     while not condition():
         assert time.monotonic() < deadline, "timed out waiting on ROS"
         executor.spin_once(timeout_sec=0.05)
+
+
+def start_localize_node(
+    map_dir: Path, ros_env: dict[str, str], **params: object
+) -> subprocess.Popen[str]:
+    """``vlocbench ros localize`` on ``map_dir`` in its own process, with the ROS parameters
+    ``params``; its stderr is piped, for the test to show when the node does not stop cleanly."""
+    ros_args = [arg for key, value in params.items() for arg in ("-p", f"{key}:={value}")]
+    return subprocess.Popen(
+        [sys.executable, "-m", "vlocbench.cli", "ros", "localize", "--map", str(map_dir)]
+        + (["--ros-args", *ros_args] if ros_args else []),
+        env={**os.environ, **ros_env},
+        stderr=subprocess.PIPE,
+        text=True,
+    )

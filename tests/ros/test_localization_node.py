@@ -1,7 +1,4 @@
-import os
 import signal
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -14,7 +11,7 @@ from rclpy.parameter import Parameter
 from sensor_msgs.msg import CameraInfo, Image
 
 from tests.conftest import CAMERA, assert_stops_cleanly
-from tests.ros.conftest import spin_until
+from tests.ros.conftest import spin_until, start_localize_node
 from vlocbench.bench.visual import camera_model
 from vlocbench.errors import UnknownNameError
 from vlocbench.geometry import pose_error
@@ -131,26 +128,7 @@ def test_the_cli_node_answers_from_its_own_process_and_stops_cleanly(
     (its native libraries loaded), both signals end it with 0 and no native stack trace."""
 
     image, world_from_vehicle = query
-    env = {**os.environ, **ros_env}
-    proc = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "vlocbench.cli",
-            "ros",
-            "localize",
-            "--map",
-            str(sift_map[0]),
-            "--ros-args",
-            "-p",
-            "localization_frequence:=5.0",
-            "-p",
-            "camera_topic:=cam",
-        ],
-        env=env,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
+    proc = start_localize_node(sift_map[0], ros_env, localization_frequence=5.0, camera_topic="cam")
     try:
         tester = _Tester(ros_context)
         cam_pub = tester.create_publisher(Image, "cam", 10)

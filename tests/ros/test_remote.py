@@ -1,13 +1,11 @@
 import dataclasses
-import os
 import signal
-import subprocess
-import sys
 
 import numpy as np
 import pytest
 
 from tests.conftest import CAMERA
+from tests.ros.conftest import start_localize_node
 from vlocbench.bench import EpisodeConfig, run_episode
 from vlocbench.bench.methods import RosEndpoint
 from vlocbench.bench.visual import VisualLocalizer
@@ -17,24 +15,7 @@ from vlocbench.ros.remote import RosLocalizer
 @pytest.fixture
 def node(ros_env, sift_map):
     """Our localization node on the small town's map, in its own process."""
-    env = {**os.environ, **ros_env}
-    proc = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "vlocbench.cli",
-            "ros",
-            "localize",
-            "--map",
-            str(sift_map[0]),
-            "--ros-args",
-            "-p",
-            "localization_frequence:=50.0",
-        ],
-        env=env,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
+    proc = start_localize_node(sift_map[0], ros_env, localization_frequence=50.0)
     yield proc
     proc.send_signal(signal.SIGINT)
     assert proc.wait(timeout=30) == 0, proc.stderr.read()
