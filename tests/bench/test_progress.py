@@ -30,19 +30,39 @@ def test_a_stage_counts_in_its_own_unit():
     assert "40/40" in screen.getvalue() and "pair/s" in screen.getvalue()
 
 
+class Clock:
+    """Seconds that pass only when a test says so."""
+
+    def __init__(self):
+        self.s = 1000.0
+
+    def __call__(self):
+        return self.s
+
+
 def test_without_a_terminal_a_line_every_period_and_at_the_end(caplog):
     caplog.set_level(logging.INFO, logger="vlocbench.progress")
-    log = Progress("episodes", 10, "episode", stream=io.StringIO(), period_s=3600)
+    clock = Clock()
+    log = Progress("episodes", 10, "episode", stream=io.StringIO(), period_s=3600, clock=clock)
     for done in range(1, 11):
+        clock.s += 30
         log.update_to(done, "ok 3")
-    assert [r.getMessage() for r in caplog.records] == ["episodes: 10/10 episodes (100 %); ok 3"]
-    caplog.clear()
-    every = Progress("maps", 2, "map", stream=io.StringIO(), period_s=0)
-    every.update_to(1)
-    every.update_to(2)
     assert [r.getMessage() for r in caplog.records] == [
-        "maps: 1/2 maps (50 %)",
-        "maps: 2/2 maps (100 %)",
+        "episodes: 10/10 episodes (100 %) in 5 min; ok 3"
+    ]
+    caplog.clear()
+    clock = Clock()
+    every = Progress("maps", 4, "map", stream=io.StringIO(), period_s=0, clock=clock)
+    every.update_to(0)
+    clock.s += 1200
+    every.update_to(1)
+    clock.s += 2 * 3600
+    every.update_to(4)
+    # the time left from the rate so far: 3 maps at 20 min each
+    assert [r.getMessage() for r in caplog.records] == [
+        "maps: 0/4 maps (0 %), 0 s so far",
+        "maps: 1/4 maps (25 %), 20 min so far, about 60 min left",
+        "maps: 4/4 maps (100 %) in 2.3 h",
     ]
 
 
