@@ -316,6 +316,46 @@ def _report(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cache(args: argparse.Namespace) -> int:
+    import time
+
+    from vlocbench.bench import cache
+    from vlocbench.bench.experiment import load_experiment
+
+    if args.delete and not args.keep:
+        raise VlocbenchError(
+            "--delete: name the experiments whose galleries and maps to keep (--keep)"
+        )
+    if not args.cache.is_dir():
+        raise VlocbenchError(f"--cache: {args.cache} is not a folder")
+    found = cache.entries(args.cache)
+    plans = [load_experiment(path) for path in args.keep or ()]
+    stale = {e.path for e in cache.unused(args.cache, plans)} if plans else set()
+    for e in found:
+        changed = time.strftime("%Y-%m-%d", time.localtime(e.modified_s))
+        mark = "  unused" if e.path in stale else ""
+        print(f"{e.size_bytes / 1e6:9.0f} MB  {changed}  {e.name}{mark}")
+    total = sum(e.size_bytes for e in found)
+    print(
+        f"{args.cache}: {sum(e.kind == 'gallery' for e in found)} galleries, "
+        f"{sum(e.kind == 'map' for e in found)} maps, {total / 1e9:.2f} GB"
+    )
+    if plans:
+        freed = [e for e in found if e.path in stale]
+        print(
+            f"{len(freed)} of them ({sum(e.size_bytes for e in freed) / 1e9:.2f} GB) used by none "
+            f"of the {len(plans)} experiment(s)"
+            + ("" if args.delete else "; --delete removes them")
+        )
+        if args.delete:
+            busy = [e.name for e in freed if not cache.delete(e)]
+            print(
+                f"deleted {len(freed) - len(busy)}"
+                + (f"; being built, kept: {', '.join(busy)}" if busy else "")
+            )
+    return 0
+
+
 def _gallery(args: argparse.Namespace) -> int:
     from vlocbench.bench.gallery_capture import capture_gallery
     from vlocbench.bench.towns import plan_town_route
@@ -704,6 +744,24 @@ def _add_experiment_verbs(sub: Any, shared: dict[str, argparse.ArgumentParser]) 
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--no-report", action="store_true", help="skip the report")
     p.set_defaults(func=_run)
+
+    p = sub.add_parser(
+        "cache",
+        help="the galleries and maps experiments share: sizes, and what given experiments no "
+        "longer use",
+    )
+    p.add_argument("--cache", type=Path, default=Path("out/cache"), help="the cache folder")
+    p.add_argument(
+        "--keep",
+        type=Path,
+        nargs="+",
+        metavar="EXPERIMENT",
+        help="experiment YAMLs whose galleries and maps are in use; the rest is marked unused",
+    )
+    p.add_argument(
+        "--delete", action="store_true", help="with --keep: remove the unused galleries and maps"
+    )
+    p.set_defaults(func=_cache)
 
     p = sub.add_parser("export", help="a run's episodes for evo, hloc, COLMAP or ROS 2 tools")
     p.add_argument("output", type=Path, help="the experiment's output folder")
