@@ -201,7 +201,7 @@ def _run(args: argparse.Namespace) -> int:
     from vlocbench.bench.worker import default_workers
 
     plan = load_experiment(args.experiment).only(
-        args.towns or (), args.methods or (), args.kinds or ()
+        args.towns or (), args.methods or (), args.kinds or (), args.setup or ()
     )
     if args.output:
         plan = plan.with_output(args.output)
@@ -740,6 +740,12 @@ def _add_experiment_verbs(sub: Any, shared: dict[str, argparse.ArgumentParser]) 
         type=_names,
         help="only these kinds of its episodes (comma-separated: recall, failure, baseline), "
         "e.g. the recall drives of a long sweep first",
+    )
+    p.add_argument(
+        "--setup",
+        action="append",
+        help="only this setup of its sweep, by its label (k=0 or illumination.k=0; "
+        "repeat the option for more)",
     )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--no-report", action="store_true", help="skip the report")

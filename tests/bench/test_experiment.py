@@ -134,6 +134,15 @@ def test_part_of_a_plan_keeps_its_episode_keys():
         whole.only(kinds=["recalls"])
     with pytest.raises(UnknownNameError, match="unknown episode kind 'baseline'"):
         whole.only(kinds=["recall"]).only(kinds=["baseline"])  # not in the part
+    # a setup of the sweep, by its label or without the key's first part
+    night = whole.only(setups=["k=6"])
+    assert night.setups == whole.only(setups=["illumination.k=6"]).setups
+    assert [x.label for x in night.setups] == ["illumination.k=6"]
+    assert {t.key for t in night.tasks()} == {
+        t.key for t in whole.tasks() if t.setup.label == "illumination.k=6" or t.kind == "baseline"
+    }
+    with pytest.raises(UnknownNameError, match=r"unknown setup 'k=3'; valid: illumination\.k=0"):
+        whole.only(setups=["k=3"])
 
 
 def test_episode_settings_sweep_as_setups():

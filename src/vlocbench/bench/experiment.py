@@ -255,17 +255,24 @@ class ExperimentPlan:
         return dataclasses.replace(self, spec=dataclasses.replace(self.spec, output=str(output)))
 
     def only(
-        self, towns: Sequence[str] = (), methods: Sequence[str] = (), kinds: Sequence[str] = ()
+        self,
+        towns: Sequence[str] = (),
+        methods: Sequence[str] = (),
+        kinds: Sequence[str] = (),
+        setups: Sequence[str] = (),
     ) -> ExperimentPlan:
-        """The part of the plan in ``towns``, with ``methods`` and of the episode ``kinds``
-        (recall, failure, baseline; empty: all of them). Its episodes keep their keys, so a later
-        run of the whole plan reuses them."""
+        """The part of the plan in ``towns``, with ``methods``, of the episode ``kinds`` (recall,
+        failure, baseline) and in the ``setups`` of its sweep (by label, ``illumination.k=0``, or
+        without the key's first part, ``k=0``); empty: all of them. Its episodes keep their keys,
+        so a later run of the whole plan reuses them."""
         s = self.spec
         planned = [k for k in EPISODE_KINDS if getattr(s, k)]
+        labels = [x.label for x in self.setups]
         choices = {
             "town": (towns, s.towns),
             "method": (methods, [m.name for m in s.methods]),
             "episode kind": (kinds, planned),
+            "setup": (setups, labels + [short_label(label) for label in labels]),
         }
         for kind, (names, valid) in choices.items():
             for name in names:
@@ -279,7 +286,12 @@ class ExperimentPlan:
             failure=s.failure and (not kinds or "failure" in kinds),
             baseline=s.baseline and (not kinds or "baseline" in kinds),
         )
-        return dataclasses.replace(self, spec=part)
+        chosen = tuple(
+            x
+            for x in self.setups
+            if not setups or x.label in setups or short_label(x.label) in setups
+        )
+        return dataclasses.replace(self, spec=part, setups=chosen)
 
     def methods_of(self, setup: Setup) -> tuple[MethodSpec, ...]:
         """The plan's methods as ``setup`` runs them, its swept ``methods.NAME.*`` values set (a
@@ -424,6 +436,11 @@ def _levels(key: str, value: Any) -> list[Any]:
     if not levels or levels == [[]]:
         raise ConfigError(f"sweep.{key}", "an empty list expands to zero runs")
     return levels
+
+
+def short_label(label: str) -> str:
+    """A setup's label without its first key's first part: ``k=0`` for ``illumination.k=0``."""
+    return label.split(".", 1)[-1]
 
 
 def _label(key: str, value: Any) -> str:

@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from vlocbench.bench.experiment import short_label
 from vlocbench.bench.export import estimate_poses, localizations
 from vlocbench.bench.replay import QueryRenderer, episode_camera
 from vlocbench.bench.store import EpisodeRow, StoreError, read_episode_table, read_latest_run
@@ -65,7 +66,7 @@ def choose_episode(
     match = [
         r
         for r in done
-        if setup in (None, r.setup, r.setup.split(".", 1)[-1]) and method in (None, r.method)
+        if setup in (None, r.setup, short_label(r.setup)) and method in (None, r.method)
     ]
     if not match:
         there = sorted({f"{r.setup} / {r.method}" for r in done})
