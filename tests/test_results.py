@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from vlocbench import results
-from vlocbench.bench.experiment import plan_from_stored
+from vlocbench.bench.experiment import load_experiment, plan_from_stored
 from vlocbench.bench.store import read_latest_run
 from vlocbench.bench.summary import summarize
 
@@ -32,3 +32,15 @@ def test_episodes_as_a_dataframe_give_the_reports_numbers(tiny):
     traj, locs = results.trajectory(out, one.key), results.localizations(out, one.key)
     assert len(locs) == one.queries and locs.success.mean() > 0.5
     assert np.isclose(traj.time_s.diff().median(), 0.05) and {"true_x_m", "ekf_x_m"} <= set(traj)
+
+
+def test_episodes_of_an_experiment_file_whichever_runs_drove_them(tiny):
+    root, _ = tiny
+    out = root / "out"
+    latest = results.episodes(out)
+    whole = results.episodes(out, root / "tiny.yaml")  # the file, as a user names it
+    assert sorted(whole.key) == sorted(latest.key)
+    noon = results.episodes(out, load_experiment(root / "tiny.yaml").only(setups=["k=0"]))
+    assert set(noon.kind) == {"failure", "recall", "baseline"}
+    assert set(noon[noon.kind != "baseline"]["illumination.k"]) == {0}
+    assert len(noon) < len(whole)

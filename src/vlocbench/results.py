@@ -7,7 +7,9 @@ and one per episode for its trajectory and its localizations.
 >>> failures.groupby(["town", "method", "weather.fog_visual_range_m"]).failures_per_km.mean()
 
 gives the mean column of the report's failure-rate table (the odometry line is the ``odometry``
-method; its drives serve every setup, so its rows carry the setup they were stored under).
+method; its drives serve every setup, so its rows carry the setup they were stored under). After
+runs of parts of an experiment (``vlocbench run ... --methods sift``), name the experiment file for
+all of it: ``results.episodes("out/paper/weather", "experiments/paper/weather.yaml")``.
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from vlocbench.bench.experiment import ExperimentPlan, plan_from_stored
+from vlocbench.bench.experiment import ExperimentPlan, load_experiment, plan_from_stored
 from vlocbench.bench.metrics import PLACE_RADII_M, PLACE_RANKS, RECALL_THRESHOLDS
 from vlocbench.bench.store import EpisodeRow, read_episode_table, read_episodes, read_latest_run
 
@@ -34,9 +36,12 @@ _SPREAD = {
 }
 
 
-def episodes(output_dir: str | Path, plan: ExperimentPlan | None = None) -> pd.DataFrame:
-    """The episodes of the latest run in ``output_dir`` (or every stored episode of ``plan``), a
-    row each: ``ID_COLUMNS``; the setup's swept levels, a column per key (grouped levels spread:
+def episodes(
+    output_dir: str | Path, plan: ExperimentPlan | str | Path | None = None
+) -> pd.DataFrame:
+    """The episodes of the latest run in ``output_dir``, or every stored episode of ``plan`` (an
+    experiment file or its plan: the whole experiment, whichever runs drove its parts), a row
+    each: ``ID_COLUMNS``; the setup's swept levels, a column per key (grouped levels spread:
     ``weather.fog_visual_range_m``); every metric of ``EpisodeMetrics`` (recall tuples spread over
     ``recall_0.25m_2deg`` ...), the declared metrics by name, and the episode's ``wall_s``.
     Episodes that ended in an error have NaN metrics and their ``error``."""
@@ -44,6 +49,8 @@ def episodes(output_dir: str | Path, plan: ExperimentPlan | None = None) -> pd.D
         stored, rows = read_latest_run(output_dir)
         plan = plan_from_stored(stored)
     else:
+        if not isinstance(plan, ExperimentPlan):
+            plan = load_experiment(plan)
         keys = {t.key for t in plan.tasks()}
         rows = [r for r in read_episodes(output_dir) if r.key in keys]
     levels = {s.label: _levels(s.levels) for s in plan.setups}
