@@ -1,4 +1,5 @@
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -202,6 +203,13 @@ def test_cli_run_and_report_errors(tiny, tmp_path, capsys):
     assert main(["report", str(root / "out"), "--no-examples"]) == 0
     assert "index.html" in capsys.readouterr().out
     assert os.path.exists(root / "out" / "report" / "tables.md")
+    # a part of the run again (all done: only its report), in a copy of the store
+    shutil.copytree(root / "out", tmp_path / "copy")
+    part = ["run", str(root / "tiny.yaml"), "--setup", "k=0", "--output", str(tmp_path / "copy")]
+    assert main([*part, "--no-progress", "--no-examples"]) == 0
+    out = capsys.readouterr().out
+    assert "0 episodes run, 3 done before" in out
+    assert f"--experiment {root / 'tiny.yaml'})" in out  # how to report the whole experiment
 
 
 @pytest.mark.parametrize("stop", [signal.SIGINT, signal.SIGTERM])

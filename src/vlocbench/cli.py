@@ -227,6 +227,11 @@ def _run(args: argparse.Namespace) -> int:
     files = write_report(plan.output_dir, examples=not args.no_examples)
     print("\n".join(summary_lines(files.summary)))
     print(f"report: {files.html.resolve()}")
+    if args.towns or args.methods or args.kinds or args.setup:
+        print(
+            f"(of this part; of the whole experiment: vlocbench report {plan.output_dir} "
+            f"--experiment {args.experiment})"
+        )
     return 1 if summary.errors else 0
 
 
