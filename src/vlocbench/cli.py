@@ -244,7 +244,7 @@ def _missing_ros_extra(exc: ImportError) -> VlocbenchError:
 def _view(args: argparse.Namespace) -> int:
     from vlocbench.bench.view import VIEW_DIR, choose_episode, record_episode
 
-    row = choose_episode(args.output, args.episode, args.setup, args.method)
+    row = choose_episode(args.output, args.episode, args.setup, args.method, args.experiment)
     out = args.out or args.output / VIEW_DIR / f"{row.key}.rrd"
     record_episode(args.output, row, out, images=args.images, spawn=args.spawn)
     print(
@@ -258,14 +258,14 @@ def _export(args: argparse.Namespace) -> int:
     if args.format:
         from vlocbench.bench.export import EXPORT_DIR, export_run
 
-        written = export_run(args.output, args.format)
+        written = export_run(args.output, args.format, args.experiment)
         print(f"wrote {len(written)} files to {args.output / EXPORT_DIR / args.format}")
         return 0
     try:
         from vlocbench.ros.bags import export_bags
     except ImportError as exc:
         raise _missing_ros_extra(exc) from None
-    written = export_bags(args.output, images=args.images)
+    written = export_bags(args.output, images=args.images, experiment=args.experiment)
     print(f"wrote {len(written)} bags to {args.output / 'bags'}")
     return 0
 
@@ -308,11 +308,9 @@ def _signals_interrupt() -> Iterator[None]:
 
 
 def _report(args: argparse.Namespace) -> int:
-    from vlocbench.bench.experiment import load_experiment
     from vlocbench.bench.report import write_report
 
-    plan = load_experiment(args.experiment) if args.experiment else None
-    files = write_report(args.output, examples=not args.no_examples, plan=plan)
+    files = write_report(args.output, examples=not args.no_examples, plan=args.experiment)
     print(
         f"{files.summary.episodes} of the {files.summary.planned} episodes of {files.summary.plan.name}"
     )
@@ -723,6 +721,12 @@ def _spin_node(load: Any, ros_args: list[str]) -> int:
     return 0
 
 
+EXPERIMENT_HELP = (
+    "this experiment file: every episode of it in OUTPUT, whichever runs drove its parts "
+    "(default: the latest run)"
+)
+
+
 def _add_experiment_verbs(sub: Any, shared: dict[str, argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
         "run",
@@ -792,12 +796,14 @@ def _add_experiment_verbs(sub: Any, shared: dict[str, argparse.ArgumentParser]) 
         action="store_true",
         help="with --rosbag: the query images too (JPEG, rendered again from the truth)",
     )
+    p.add_argument("--experiment", type=Path, help=EXPERIMENT_HELP)
     p.set_defaults(func=_export)
 
     p = sub.add_parser("view", help="an episode in 3D: a rerun recording (needs the view extra)")
     p.add_argument("output", type=Path, help="the experiment's output folder")
     p.add_argument(
-        "--episode", help="episode key (or its start); else the first of --setup/--method"
+        "--episode",
+        help="episode key (or its start), of any run; else the first of --setup/--method",
     )
     p.add_argument("--setup", help="setup label, e.g. k=6 (see the report)")
     p.add_argument("--method", help="method name, or odometry for the baseline")
@@ -808,6 +814,7 @@ def _add_experiment_verbs(sub: Any, shared: dict[str, argparse.ArgumentParser]) 
     )
     p.add_argument("--out", type=Path, help="recording file (default: OUTPUT/view/KEY.rrd)")
     p.add_argument("--spawn", action="store_true", help="also open the rerun viewer")
+    p.add_argument("--experiment", type=Path, help=EXPERIMENT_HELP)
     p.set_defaults(func=_view)
 
     p = sub.add_parser(
@@ -816,12 +823,7 @@ def _add_experiment_verbs(sub: Any, shared: dict[str, argparse.ArgumentParser]) 
         help="tables, figures and an HTML page of a run's results",
     )
     p.add_argument("output", type=Path, help="the experiment's output folder")
-    p.add_argument(
-        "--experiment",
-        type=Path,
-        help="report this experiment file over every episode of it in OUTPUT, whichever "
-        "runs ran them (default: the latest run)",
-    )
+    p.add_argument("--experiment", type=Path, help=EXPERIMENT_HELP)
     p.set_defaults(func=_report)
 
 

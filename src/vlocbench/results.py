@@ -20,9 +20,9 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from vlocbench.bench.experiment import ExperimentPlan, load_experiment, plan_from_stored
 from vlocbench.bench.metrics import PLACE_RADII_M, PLACE_RANKS, RECALL_THRESHOLDS
-from vlocbench.bench.store import EpisodeRow, read_episode_table, read_episodes, read_latest_run
+from vlocbench.bench.runs import Experiment, stored_episodes
+from vlocbench.bench.store import EpisodeRow, read_episode_table
 
 # the columns of each row before its levels and metrics
 ID_COLUMNS = ("key", "kind", "town", "method", "setup", "repetition", "seed", "status", "error")
@@ -36,23 +36,14 @@ _SPREAD = {
 }
 
 
-def episodes(
-    output_dir: str | Path, plan: ExperimentPlan | str | Path | None = None
-) -> pd.DataFrame:
+def episodes(output_dir: str | Path, plan: Experiment | None = None) -> pd.DataFrame:
     """The episodes of the latest run in ``output_dir``, or every stored episode of ``plan`` (an
     experiment file or its plan: the whole experiment, whichever runs drove its parts), a row
     each: ``ID_COLUMNS``; the setup's swept levels, a column per key (grouped levels spread:
     ``weather.fog_visual_range_m``); every metric of ``EpisodeMetrics`` (recall tuples spread over
     ``recall_0.25m_2deg`` ...), the declared metrics by name, and the episode's ``wall_s``.
     Episodes that ended in an error have NaN metrics and their ``error``."""
-    if plan is None:
-        stored, rows = read_latest_run(output_dir)
-        plan = plan_from_stored(stored)
-    else:
-        if not isinstance(plan, ExperimentPlan):
-            plan = load_experiment(plan)
-        keys = {t.key for t in plan.tasks()}
-        rows = [r for r in read_episodes(output_dir) if r.key in keys]
+    plan, rows = stored_episodes(output_dir, plan)
     levels = {s.label: _levels(s.levels) for s in plan.setups}
     records = [_record(r, levels.get(r.setup, {})) for r in rows]
     frame = pd.DataFrame.from_records(records)

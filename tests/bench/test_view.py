@@ -38,3 +38,29 @@ def test_an_episode_as_a_rerun_recording_reads_back(tiny, tmp_path, capsys):
 
     page = write_report(out, examples=False).html.read_text()
     assert f'<a href="../view/{row.key}.rrd">' in page and "failure drive, small, sift" in page
+
+
+def test_episodes_of_earlier_runs_by_key_or_by_experiment(tiny, tmp_path):
+    """After a run of one part of the experiment (its latest run), an episode of another part is
+    found by its key, and by setup and method once the experiment is named."""
+    import shutil
+
+    from vlocbench.bench.experiment import load_experiment
+    from vlocbench.bench.export import export_run
+    from vlocbench.bench.runner import run_experiment
+    from vlocbench.bench.store import StoreError
+    from vlocbench.bench.view import choose_episode
+
+    root, _ = tiny
+    out = tmp_path / "out"
+    shutil.copytree(root / "out", out)
+    plan = load_experiment(root / "tiny.yaml").with_output(out)
+    run_experiment(plan.only(setups=["k=0"]), progress=False)  # all done: a run of the part
+    night = choose_episode(out, setup="k=6", method="sift", experiment=root / "tiny.yaml")
+    assert night.setup.endswith("k=6") and night.kind == "failure"
+    assert choose_episode(out, key=night.key[:12]).key == night.key
+    with pytest.raises(StoreError, match=r"there are: illumination\.k=0"):
+        choose_episode(out, setup="k=6", method="sift")  # not in the latest run
+    part = {p.parent.name for p in export_run(out, "tum")}
+    whole = {p.parent.name for p in export_run(out, "tum", plan)}
+    assert night.key in whole - part

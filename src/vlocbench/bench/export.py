@@ -31,7 +31,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from vlocbench.bench.store import EpisodeRow, read_episode_table, read_latest_run
+from vlocbench.bench.runs import Experiment, stored_rows
+from vlocbench.bench.store import EpisodeRow, read_episode_table
 from vlocbench.bench.visual import camera_model
 from vlocbench.config import from_dict, require_one_of
 from vlocbench.geometry import invert_pose, make_pose, quaternion_from_rotation, rpy_to_matrix
@@ -172,11 +173,13 @@ def _export_hloc(locs: dict[str, Array], config: dict[str, Any], dest: Path) -> 
     ]
 
 
-def export_run(output_dir: str | Path, fmt: str) -> list[Path]:
-    """Every finished episode of the latest run in ``output_dir`` as ``fmt`` in
-    ``OUTPUT/export/FMT/KEY/`` (written again each time); returns the files written."""
+def export_run(
+    output_dir: str | Path, fmt: str, experiment: Experiment | None = None
+) -> list[Path]:
+    """Every finished episode of the latest run in ``output_dir`` (or of ``experiment``) as
+    ``fmt`` in ``OUTPUT/export/FMT/KEY/`` (written again each time); returns the files written."""
     require_one_of(fmt, FORMATS, "format")
-    _, rows = read_latest_run(output_dir)
+    rows = stored_rows(output_dir, experiment)
     out = Path(output_dir) / EXPORT_DIR / fmt
     if fmt == "colmap":
         return [export_colmap(g, out / g.root.name) for g in _galleries(rows)]

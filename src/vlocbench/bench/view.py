@@ -24,7 +24,8 @@ import numpy as np
 from vlocbench.bench.experiment import short_label
 from vlocbench.bench.export import estimate_poses, localizations
 from vlocbench.bench.replay import QueryRenderer, episode_camera
-from vlocbench.bench.store import EpisodeRow, StoreError, read_episode_table, read_latest_run
+from vlocbench.bench.runs import Experiment, stored_rows
+from vlocbench.bench.store import EpisodeRow, StoreError, read_episode_table, read_episodes
 from vlocbench.bench.towns import route_named, town_named
 from vlocbench.bench.visual import camera_model
 from vlocbench.errors import MachineError
@@ -53,16 +54,18 @@ def choose_episode(
     key: str | None = None,
     setup: str | None = None,
     method: str | None = None,
+    experiment: Experiment | None = None,
 ) -> EpisodeRow:
-    """The finished episode ``key``, or the first one (failure drives first) of ``setup`` and
-    ``method`` (each optional); a clear error lists what there is."""
-    _, rows = read_latest_run(output_dir)
-    done = [r for r in rows if r.status == "ok"]
+    """The finished episode ``key`` (any stored one), or the first one (failure drives first) of
+    ``setup`` and ``method`` (each optional) in the latest run or in ``experiment``; a clear error
+    lists what there is."""
     if key is not None:
+        done = [r for r in read_episodes(output_dir) if r.status == "ok"]
         match = [r for r in done if r.key == key or r.key.startswith(key)]
         if len(match) != 1:
             raise StoreError(f"{output_dir}: {len(match)} finished episodes match key {key!r}")
         return match[0]
+    done = [r for r in stored_rows(output_dir, experiment) if r.status == "ok"]
     match = [
         r
         for r in done

@@ -27,7 +27,8 @@ from rosbags.typesys import Stores, get_typestore
 
 from vlocbench.bench.export import estimate_poses, localizations, vehicle_poses
 from vlocbench.bench.replay import QueryRenderer
-from vlocbench.bench.store import EpisodeRow, read_episode_table, read_latest_run
+from vlocbench.bench.runs import Experiment, stored_rows
+from vlocbench.bench.store import EpisodeRow, read_episode_table
 from vlocbench.bench.visual import camera_model
 from vlocbench.config import from_dict
 from vlocbench.geometry import quaternion_from_rotation
@@ -206,11 +207,13 @@ def _has_images(bag: Path) -> bool:
         return any(c.topic.endswith("/image/compressed") for c in reader.connections)
 
 
-def export_bags(output_dir: str | Path, images: bool = False) -> list[Path]:
-    """Every finished episode of the latest run in ``output_dir`` as ``OUTPUT/bags/KEY`` (bags
-    already there are kept, unless ``images`` asks for what they lack); returns the bags
-    written."""
-    _, rows = read_latest_run(output_dir)
+def export_bags(
+    output_dir: str | Path, images: bool = False, experiment: Experiment | None = None
+) -> list[Path]:
+    """Every finished episode of the latest run in ``output_dir`` (or of ``experiment``) as
+    ``OUTPUT/bags/KEY`` (bags already there are kept, unless ``images`` asks for what they lack);
+    returns the bags written."""
+    rows = stored_rows(output_dir, experiment)
     out = Path(output_dir) / "bags"
     out.mkdir(parents=True, exist_ok=True)
     todo = [

@@ -11,7 +11,6 @@ from pathlib import Path
 
 from vlocbench.bench.across import across_towns, rank_agreement
 from vlocbench.bench.consistency import confidence_curve
-from vlocbench.bench.experiment import ExperimentPlan, plan_from_stored
 from vlocbench.bench.metrics import METRICS
 from vlocbench.bench.report.comparison import paper_comparison_tables
 from vlocbench.bench.report.figures import (
@@ -50,13 +49,8 @@ from vlocbench.bench.requirements import (
     oracle_sweeps,
     placed_methods,
 )
-from vlocbench.bench.store import (
-    EpisodeRow,
-    StoreError,
-    read_episode_table,
-    read_episodes,
-    read_latest_run,
-)
+from vlocbench.bench.runs import Experiment, stored_episodes
+from vlocbench.bench.store import EpisodeRow, StoreError, read_episode_table
 from vlocbench.bench.summary import Summary, summarize
 
 REPORT_DIR = "report"
@@ -267,19 +261,12 @@ def _write_figures(summary: Summary, out: Path, drives: DriveFigures) -> list[Pa
 
 
 def write_report(
-    output_dir: str | Path, examples: bool = True, plan: ExperimentPlan | None = None
+    output_dir: str | Path, examples: bool = True, plan: Experiment | None = None
 ) -> ReportFiles:
     """Write the tables, figures and the HTML page of the latest run in ``output_dir``, or of
-    ``plan`` over every episode of it stored there (run in parts, by several runs)."""
-    if plan is None:
-        stored, rows = read_latest_run(output_dir)
-        plan = plan_from_stored(stored)
-    else:
-        rows = read_episodes(output_dir)
-        keys = {t.key for t in plan.tasks()}
-        rows = [r for r in rows if r.key in keys]
-        if not rows:
-            raise StoreError(f"{output_dir} holds no episode of experiment {plan.name!r}")
+    ``plan`` (an experiment's plan or file) over every episode of it stored there (run in parts,
+    by several runs)."""
+    plan, rows = stored_episodes(output_dir, plan)
     summary = summarize(plan, rows)
     out = Path(output_dir) / REPORT_DIR
     out.mkdir(parents=True, exist_ok=True)
