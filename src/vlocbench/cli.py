@@ -333,7 +333,7 @@ def _cache(args: argparse.Namespace) -> int:
         raise VlocbenchError(f"--cache: {args.cache} is not a folder")
     found = cache.entries(args.cache)
     plans = [load_experiment(path) for path in args.keep or ()]
-    stale = {e.path for e in cache.unused(args.cache, plans)} if plans else set()
+    stale = {e.path for e in cache.unused(args.cache, plans, found)} if plans else set()
     for e in found:
         changed = time.strftime("%Y-%m-%d", time.localtime(e.modified_s))
         mark = "  unused" if e.path in stale else ""

@@ -26,3 +26,16 @@ def building(folder: Path, what: str) -> Iterator[None]:
             logger.info(f"another process is building {what} in {folder}; waiting for it")
             fcntl.flock(lock, fcntl.LOCK_EX)
         yield  # the lock goes with the file's closing
+
+
+@contextmanager
+def unless_building(folder: Path) -> Iterator[bool]:
+    """Hold ``folder``'s lock if no process is building in it: True while held, False (and not
+    held) when one is. For removing a folder without pulling it from under a build."""
+    with open(folder / LOCK_FILE, "a") as lock:
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            yield False
+            return
+        yield True  # the lock goes with the file's closing

@@ -5,7 +5,6 @@ the cache holds and what a set of experiments still uses, so that the rest can b
 
 from __future__ import annotations
 
-import fcntl
 import os
 import shutil
 from collections.abc import Iterable, Sequence
@@ -15,7 +14,7 @@ from typing import Literal
 
 from vlocbench.bench.experiment import ExperimentPlan
 from vlocbench.loc.gallery import GALLERY_FILE, Gallery
-from vlocbench.locks import LOCK_FILE
+from vlocbench.locks import unless_building
 
 GALLERIES, MAPS = "galleries", "maps"
 
@@ -65,25 +64,23 @@ def used_by(plans: Iterable[ExperimentPlan], cache: str | Path) -> set[Path]:
     return used
 
 
-def unused(cache: str | Path, plans: Sequence[ExperimentPlan]) -> list[CacheEntry]:
-    """The entries of ``cache`` that none of ``plans`` uses."""
+def unused(
+    cache: str | Path,
+    plans: Sequence[ExperimentPlan],
+    among: Sequence[CacheEntry] | None = None,
+) -> list[CacheEntry]:
+    """The entries of ``cache`` (or those of ``among``, already listed) that none of ``plans``
+    uses."""
     keep = used_by(plans, cache)
-    return [e for e in entries(cache) if e.path.resolve() not in keep]
+    return [e for e in (entries(cache) if among is None else among) if e.path.resolve() not in keep]
 
 
 def delete(entry: CacheEntry) -> bool:
     """Remove ``entry``; False, and nothing removed, while a process is building it."""
-    lock_path = entry.path / LOCK_FILE
-    if not lock_path.exists():
-        shutil.rmtree(entry.path)
-        return True
-    with open(lock_path, "a") as lock:
-        try:
-            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            return False
-        shutil.rmtree(entry.path)  # the lock goes with the file's closing
-    return True
+    with unless_building(entry.path) as free:
+        if free:
+            shutil.rmtree(entry.path)
+    return free
 
 
 def _entry(kind: Literal["gallery", "map"], path: Path) -> CacheEntry:
