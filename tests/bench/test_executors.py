@@ -130,14 +130,21 @@ def test_a_killed_or_interrupted_run_leaves_no_process_and_a_consistent_store(
 def dask_cluster(tmp_path):
     """Two single-threaded Dask worker processes on loopback."""
     distributed = pytest.importorskip("distributed")
-    with distributed.LocalCluster(
-        n_workers=2,
-        threads_per_worker=1,
-        processes=True,
-        host="127.0.0.1",
-        dashboard_address=None,
-        local_directory=str(tmp_path / "dask"),
-    ) as cluster:
+    import dask
+
+    # one job at a time on each worker, so a worker's death catches exactly the job it runs
+    # (Dask's default saturation, 1.1, sometimes queues a second job on a one-thread worker)
+    with (
+        dask.config.set({"distributed.scheduler.worker-saturation": 1.0}),
+        distributed.LocalCluster(
+            n_workers=2,
+            threads_per_worker=1,
+            processes=True,
+            host="127.0.0.1",
+            dashboard_address=None,
+            local_directory=str(tmp_path / "dask"),
+        ) as cluster,
+    ):
         yield cluster
 
 
