@@ -753,8 +753,8 @@ def _add_experiment_verbs(sub: Any, shared: dict[str, argparse.ArgumentParser]) 
     p.add_argument(
         "--setup",
         action="append",
-        help="only this setup of its sweep, by its label (k=0 or illumination.k=0; "
-        "repeat the option for more)",
+        help="only this setup of its sweep, by its label (k=0 or illumination.k=0; a grouped "
+        "level by its fields, 'dz_m=4, pitch_down_deg=22.5'; repeat the option for more)",
     )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--no-report", action="store_true", help="skip the report")

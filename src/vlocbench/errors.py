@@ -39,7 +39,8 @@ class UnknownNameError(ConfigError, KeyError):
         self.kind = kind
         self.name = name
         self.valid = sorted(valid)
-        super().__init__(kind, f"unknown {kind} {name!r}; valid: {', '.join(self.valid)}")
+        sep = "; " if any(", " in v for v in self.valid) else ", "  # names with commas: setups
+        super().__init__(kind, f"unknown {kind} {name!r}; valid: {sep.join(self.valid)}")
 
     def __str__(self) -> str:  # KeyError would otherwise quote the message
         return self.args[0]

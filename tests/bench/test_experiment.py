@@ -145,6 +145,28 @@ def test_part_of_a_plan_keeps_its_episode_keys():
         whole.only(setups=["k=3"])
 
 
+def test_a_grouped_level_is_chosen_by_its_label_or_its_fields():
+    whole = _spec(
+        sweep={
+            "viewpoint": [
+                {"dz_m": 0, "pitch_down_deg": 0},
+                {"dz_m": 4, "pitch_down_deg": 22.5},
+                {"dz_m": 8, "pitch_down_deg": 37.5},
+            ]
+        }
+    )
+    label = "viewpoint(dz_m=4, pitch_down_deg=22.5)"
+    part = whole.only(setups=["dz_m=4, pitch_down_deg=22.5"])
+    assert [x.label for x in part.setups] == [label]
+    assert whole.only(setups=[label]).setups == part.setups
+    # a value's decimal point is no key's: "5)" named no setup, and no listed one is a fragment
+    with pytest.raises(UnknownNameError, match=r"valid: dz_m=0, pitch_down_deg=0; dz_m=4, ") as err:
+        whole.only(setups=["5)"])
+    assert err.value.valid == sorted(
+        [*(x.label for x in whole.setups), *(x.label[10:-1] for x in whole.setups)]
+    )
+
+
 def test_episode_settings_sweep_as_setups():
     plan = _spec(sweep={"episode.ekf.late_measurements": ["current", "replay"]})
     assert [s.episode.ekf.late_measurements for s in plan.setups] == ["current", "replay"]

@@ -22,6 +22,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import itertools
+import re
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -272,7 +273,7 @@ class ExperimentPlan:
             "town": (towns, s.towns),
             "method": (methods, [m.name for m in s.methods]),
             "episode kind": (kinds, planned),
-            "setup": (setups, labels + [short_label(label) for label in labels]),
+            "setup": (setups, list(dict.fromkeys(labels + [short_label(x) for x in labels]))),
         }
         for kind, (names, valid) in choices.items():
             for name in names:
@@ -439,8 +440,16 @@ def _levels(key: str, value: Any) -> list[Any]:
 
 
 def short_label(label: str) -> str:
-    """A setup's label without its first key's first part: ``k=0`` for ``illumination.k=0``."""
-    return label.split(".", 1)[-1]
+    """A setup's label without its first key's first part: ``k=0`` for ``illumination.k=0``, and a
+    grouped level's fields alone, ``dz_m=4, pitch_down_deg=22.5`` for ``viewpoint(dz_m=4,
+    pitch_down_deg=22.5)``. Values are not keys: a dot or a bracket inside them is kept."""
+    key = re.match(r"[A-Za-z_]\w*([.(])", label)
+    if key is None:
+        return label
+    if key.group(1) == ".":
+        return label[key.end() :]
+    close = label.index(")", key.end())
+    return label[key.end() : close] + label[close + 1 :]
 
 
 def _label(key: str, value: Any) -> str:
