@@ -324,3 +324,33 @@ def test_generated_sets_expand_into_towns_with_their_own_keys():
         _spec(towns=[{"generate": {"count": 100}}])
     with pytest.raises(UnknownNameError, match="valid: gen-STYLE-SEED-INDEX, hidden-DIGEST"):
         _spec(towns=["town99"])
+
+
+def test_the_place_revision_keys_only_episodes_of_a_camera_mounted_otherwise(monkeypatch):
+    """Where a retrieved image's place is scored from changed in revision 2 for a query camera
+    mounted otherwise than the gallery's: those episodes got new keys, the others kept theirs."""
+    from vlocbench.bench import experiment
+
+    def keys():
+        plan = _spec(
+            methods=["sift", {"name": "oracle", "kind": "oracle"}],
+            sweep={
+                "viewpoint": [{"dz_m": 0, "pitch_down_deg": 0}, {"dz_m": 4, "pitch_down_deg": 22.5}]
+            },
+        )
+        turned = _spec(sweep={"camera.extrinsics.yaw_deg": [-90, -60]})
+        return {
+            (t.setup.label, t.method_name, t.kind, t.repetition): t.key for t in plan.tasks()
+        }, {t.setup.label: t.key for t in turned.tasks() if t.kind == "recall"}
+
+    before, turned_before = keys()
+    monkeypatch.setattr(experiment, "PLACE_REVISION", 3)
+    after, turned_after = keys()
+    raised = "viewpoint(dz_m=4, pitch_down_deg=22.5)"
+    # the map method's episodes of the raised camera; not the oracle's, not odometry's
+    assert {c for c in before if before[c] != after[c]} == {
+        c for c in before if c[0] == raised and c[1] == "sift"
+    }
+    yaw = "camera.extrinsics.yaw_deg="
+    assert turned_before[yaw + "-90"] == turned_after[yaw + "-90"]
+    assert turned_before[yaw + "-60"] != turned_after[yaw + "-60"]

@@ -74,3 +74,25 @@ def test_a_failed_attempt_reports_its_stages(sift_map):
     e = localizer.localize(LocalizationQuery(0.0, (black,), np.eye(4)))
     assert not e.success and e.reason
     assert e.stage_s["features"] > 0
+
+
+def test_a_retrieved_image_is_placed_where_the_gallery_car_stood(small_town, stretch, sift_map):
+    """Place recognition scores a retrieved image by where the gallery's car stood: with the
+    query camera raised by 4 m and tilted down, that is still on the ground along the gallery's
+    drive (the query's mount would put the car 4 m under the road and metres aside)."""
+    from vlocbench.bench import LocalizationQuery
+
+    localizer = VisualLocalizer(sift_map[0], (CAMERA,), name="sift")
+    x, y, yaw = (float(v) for v in (*stretch.xy[10], stretch.yaw_rad[10]))
+    with Simulator(small_town) as sim:
+        truth = sim.teleport(x, y, yaw).world_from_vehicle()
+        frames = tuple(sim.render([CAMERA.offset(4.0, 22.5)]))
+    e = localizer.localize(LocalizationQuery(0.0, frames, truth))
+    stood = np.asarray(e.ranked_xyz_m)
+    assert len(stood) >= 5
+    assert np.allclose(stood[:, 2], truth[2, 3], atol=0.01)  # on the ground, as the truth
+    # on the gallery's drive: within a few centimetres of the route's polyline
+    a, b = stretch.xy[:-1], stretch.xy[1:]
+    t = np.einsum("psk,sk->ps", stood[:, None, :2] - a, b - a) / np.sum((b - a) ** 2, axis=1)
+    foot = a + np.clip(t, 0, 1)[..., None] * (b - a)
+    assert np.linalg.norm(stood[:, None, :2] - foot, axis=2).min(axis=1).max() < 0.05

@@ -41,6 +41,13 @@ from vlocbench.sim.scene import SCENE_VERSION
 from vlocbench.sim.town import TownSpec, load_town_spec
 
 _CONDITION_KEYS = tuple(f.name for f in dataclasses.fields(Conditions))
+
+# The place of a retrieved image, which the place-recognition figures score. 2: where the gallery's
+# car stood (through the gallery camera's mount); before, where the query camera's mount would put
+# the car, metres off for a raised, tilted or turned query camera (nothing else changed: episodes
+# with the gallery's mount keep their keys)
+PLACE_REVISION = 2
+
 SWEEP_ROOTS = (*_CONDITION_KEYS, "camera", "cameras", "episode", "methods")
 # what of a method may be swept (methods.NAME.FIELD...): its localizer's settings and a kind's
 # arguments; anything else would make another map, so it is another method
@@ -145,6 +152,9 @@ class EpisodeTask:
     route_length_m: float = 0.0  # 0: the whole route
     key: str = ""
     map_dir: str | None = None  # the method's map folder once prepared (not part of the key)
+    # the camera that took the map's images (in the key through the gallery's): where its car
+    # stood is the place of a retrieved image
+    gallery_camera: Camera | None = None
 
     @property
     def method_name(self) -> str:
@@ -369,21 +379,21 @@ class ExperimentPlan:
         # what determines the result, nothing of where it lies: the gallery by its key (the
         # town, the route, the drive, the scene version), the map by its name (the method's
         # configuration and the mapping settings)
-        key = config_hash(
-            {
-                "kind": kind,
-                "town": town_dict,
-                "scene": SCENE_VERSION,
-                "episode_version": EPISODE_VERSION,
-                "route_length_m": self.spec.route_length_m,
-                "world": world,
-                "method": method,
-                "map": self.map_name(method) if with_map and method else None,
-                "gallery": self.gallery_key(town) if with_map else None,
-                "episode": config,
-            },
-            16,
-        )
+        identity: dict[str, Any] = {
+            "kind": kind,
+            "town": town_dict,
+            "scene": SCENE_VERSION,
+            "episode_version": EPISODE_VERSION,
+            "route_length_m": self.spec.route_length_m,
+            "world": world,
+            "method": method,
+            "map": self.map_name(method) if with_map and method else None,
+            "gallery": self.gallery_key(town) if with_map else None,
+            "episode": config,
+        }
+        gallery_camera = self.spec.gallery.camera
+        if with_map and _mounted_otherwise(setup, gallery_camera):
+            identity["place"] = PLACE_REVISION  # only where the stored figures changed with it
         return EpisodeTask(
             kind=kind,
             town=town,
@@ -392,8 +402,17 @@ class ExperimentPlan:
             repetition=rep,
             episode=config,
             route_length_m=self.spec.route_length_m,
-            key=key,
+            key=config_hash(identity, 16),
+            gallery_camera=gallery_camera if with_map else None,
         )
+
+
+def _mounted_otherwise(setup: Setup, gallery_camera: Camera) -> bool:
+    """Whether the setup's first query camera, as rendered (the viewpoint's change applied), is
+    mounted other than the gallery camera."""
+    vp = setup.conditions.viewpoint
+    first = setup.cameras[0].offset(vp.dz_m, vp.pitch_down_deg)
+    return first.extrinsics != gallery_camera.extrinsics
 
 
 # what an odometry-only drive depends on among a setup's conditions: the traffic alone (it renders

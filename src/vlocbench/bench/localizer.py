@@ -54,7 +54,7 @@ class PoseEstimate:
     camera: str = ""  # the camera whose pose answered, "rig" for one PnP over all of them
     fallback: bool = False  # answered by the localizer's fallback (e.g. the best single image)
     retrieved: tuple[str, ...] = ()  # the gallery images retrieved, best first, camera by camera
-    # (R, 3) where the vehicle would stand for each of the first camera's retrieved images
+    # (R, 3) where the gallery's vehicle stood for each of the first camera's retrieved images
     ranked_xyz_m: Array | None = None
     stage_s: Mapping[str, float] = field(default_factory=dict)  # time per stage (features, ...)
 
@@ -64,9 +64,9 @@ class PoseEstimate:
         return cls(False, compute_time_s=compute_time_s, reason=reason, **attempt)
 
     def retrieval_distances_m(self, world_from_vehicle: Array) -> Array:
-        """(R,) distances from the true vehicle pose (4, 4) to where the vehicle would stand for
-        each of the retrieval's best images (``ranked_xyz_m``), best first; (0,) for a localizer
-        without retrieval."""
+        """(R,) distances from the true vehicle pose (4, 4) to where the gallery's vehicle stood
+        for each of the retrieval's best images (``ranked_xyz_m``), best first; (0,) for a
+        localizer without retrieval."""
         if self.ranked_xyz_m is None:
             return np.zeros(0)
         ranked_xyz = np.asarray(self.ranked_xyz_m, np.float64).reshape(-1, 3)

@@ -55,12 +55,14 @@ class RosEndpoint:
 @dataclass(frozen=True)
 class MethodContext:
     """What a localizer is built for: the method's ``name``, the rig ``cameras`` whose images each
-    query carries, the ``town`` it drives, and for the ``map`` kind its map folder."""
+    query carries, the ``town`` it drives, and for the ``map`` kind its map folder and the camera
+    that took the map's images."""
 
     name: str
     cameras: tuple[Camera, ...]
     town: str = ""
     map_dir: Path | None = None
+    gallery_camera: Camera | None = None
 
 
 @dataclass(frozen=True)

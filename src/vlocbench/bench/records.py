@@ -59,8 +59,8 @@ class LocalizationRecord:
     latency_s: float
     fused: bool | None
     reason: str
-    # place recognition: from the true vehicle position to where the vehicle would stand for each
-    # of the retrieval's best images, best first (m); empty for localizers without retrieval
+    # place recognition: from the true vehicle position to where the gallery's vehicle stood for
+    # each of the retrieval's best images, best first (m); empty for localizers without retrieval
     retrieval_distances_m: tuple[float, ...] = ()
     retrieved_images: tuple[str, ...] = ()  # the gallery images retrieval chose, best first
     # the answer's own (3, 3) covariance of x, y, yaw (m^2, m rad, rad^2), row by row; empty when

@@ -29,7 +29,9 @@ def camera_model(camera: Camera) -> CameraModel:
 
 
 class VisualLocalizer:
-    """Localizes the images of ``cameras`` against the map in ``map_dir``."""
+    """Localizes the images of ``cameras`` against the map in ``map_dir``. ``gallery_camera`` took
+    the map's images (default: the first of ``cameras`` as configured, before a viewpoint change):
+    its mount puts each retrieved image's car in place, for the place-recognition figures."""
 
     uses_ground_truth = False
 
@@ -39,10 +41,13 @@ class VisualLocalizer:
         cameras: Sequence[Camera],
         config: LocalizerConfig | None = None,
         name: str | None = None,
+        gallery_camera: Camera | None = None,
     ) -> None:
         self.localizer = MapLocalizer(map_dir, config)
         self._cameras = tuple(cameras)
         self.name = name or Path(map_dir).name
+        mount = (gallery_camera or self._cameras[0]).extrinsics.vehicle_from_cam()
+        self._cam_from_gallery_vehicle = invert_pose(mount)
 
     @property
     def cameras(self) -> Sequence[Camera]:
@@ -67,9 +72,9 @@ class VisualLocalizer:
         )
         # what the method takes, a share of it done by another localizer on a shared drive included
         elapsed = time.perf_counter() - start + result.shared_s
-        # where the vehicle would stand to take each of the first camera's retrieved images
-        first = query.frames[0].camera.extrinsics.vehicle_from_cam()
-        ranked = result.cameras[0].ranked_world_from_cam @ invert_pose(first)
+        # where the gallery's car stood for each of the first camera's retrieved images (not where
+        # the query's mount would put it: a raised or tilted camera would move it by metres)
+        ranked = result.cameras[0].ranked_world_from_cam @ self._cam_from_gallery_vehicle
         attempt: dict[str, Any] = {  # what a failure reports too
             "ranked_xyz_m": ranked[:, :3, 3],
             "retrieved": tuple(name for r in result.cameras for name in r.retrieved),
@@ -96,4 +101,6 @@ def map_localizer(context: MethodContext, config: LocalizerConfig) -> VisualLoca
     """The ``map`` kind of :data:`~vlocbench.bench.methods.LOCALIZER_KINDS`."""
     if context.map_dir is None:
         raise ValueError(f"{context.name}: the map kind needs its map folder")
-    return VisualLocalizer(context.map_dir, context.cameras, config, context.name)
+    return VisualLocalizer(
+        context.map_dir, context.cameras, config, context.name, context.gallery_camera
+    )

@@ -93,6 +93,7 @@ def _localizer(task: EpisodeTask) -> Localizer | None:
             cameras=tuple(task.setup.cameras),
             town=task.town,
             map_dir=Path(task.map_dir) if task.map_dir else None,
+            gallery_camera=task.gallery_camera,
         )
         _LOCALIZERS[key] = build_localizer(task.method, context)
     return _LOCALIZERS[key]
