@@ -210,6 +210,15 @@ def test_cli_run_and_report_errors(tiny, tmp_path, capsys):
     out = capsys.readouterr().out
     assert "0 episodes run, 3 done before" in out
     assert f"--experiment {root / 'tiny.yaml'})" in out  # how to report the whole experiment
+    # the noon part as an experiment of its own: the night's two episodes stay in the store, named
+    noon = tmp_path / "noon.yaml"
+    noon.write_text(
+        yaml.safe_dump({**yaml.safe_load((root / "tiny.yaml").read_text()), "sweep": {}})
+    )
+    assert main(["report", str(tmp_path / "copy"), "--experiment", str(noon), "--no-examples"]) == 0
+    out = capsys.readouterr().out
+    assert "3 of the 3 episodes of tiny" in out
+    assert f"2 more episodes in {tmp_path / 'copy'} are of other settings" in out
 
 
 @pytest.mark.parametrize("stop", [signal.SIGINT, signal.SIGTERM])

@@ -309,11 +309,20 @@ def _signals_interrupt() -> Iterator[None]:
 
 def _report(args: argparse.Namespace) -> int:
     from vlocbench.bench.report import write_report
+    from vlocbench.bench.store import read_episodes
 
     files = write_report(args.output, examples=not args.no_examples, plan=args.experiment)
     print(
         f"{files.summary.episodes} of the {files.summary.planned} episodes of {files.summary.plan.name}"
     )
+    if args.experiment:
+        # after a changed setting or definition (new keys) the older episodes stay in the store
+        others = len(read_episodes(args.output)) - files.summary.episodes
+        if others:
+            print(
+                f"{others} more episodes in {args.output} are of other settings or earlier "
+                "definitions (not in this report)"
+            )
     print(f"tables: {files.markdown}, {files.latex}")
     print(f"report: {files.html.resolve()}")
     return 0
