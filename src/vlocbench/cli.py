@@ -309,7 +309,7 @@ def _signals_interrupt() -> Iterator[None]:
 
 def _report(args: argparse.Namespace) -> int:
     from vlocbench.bench.report import write_report
-    from vlocbench.bench.store import read_episodes
+    from vlocbench.bench.store import count_episodes
 
     files = write_report(args.output, examples=not args.no_examples, plan=args.experiment)
     print(
@@ -317,7 +317,7 @@ def _report(args: argparse.Namespace) -> int:
     )
     if args.experiment:
         # after a changed setting or definition (new keys) the older episodes stay in the store
-        others = len(read_episodes(args.output)) - files.summary.episodes
+        others = count_episodes(args.output) - files.summary.episodes
         if others:
             print(
                 f"{others} more episodes in {args.output} are of other settings or earlier "

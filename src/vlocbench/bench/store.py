@@ -188,6 +188,12 @@ def read_latest_run(output_dir: str | Path) -> tuple[dict[str, Any], list[Episod
         return json.loads(last[1]), _run_rows(db, last[0])
 
 
+def count_episodes(output_dir: str | Path) -> int:
+    """How many episodes are stored, whichever run asked for them (none read)."""
+    with _read_only(output_dir) as db:
+        return int(db.execute("SELECT COUNT(*) FROM episodes").fetchone()[0])
+
+
 def read_episodes(output_dir: str | Path) -> list[EpisodeRow]:
     """Every stored episode, whichever run asked for it, by key."""
     with _read_only(output_dir) as db:
