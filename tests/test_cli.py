@@ -121,6 +121,8 @@ def test_gallery_build_map_and_localize(tmp_path, capsys):
     assert "needs --map" in capsys.readouterr().err
     assert main(["build-map", str(gallery), "--method", "surf"]) == 1
     assert "unknown method 'surf'" in capsys.readouterr().err
+    assert main(["build-map", str(gallery), "--min-track-length", "1"]) == 1
+    assert "mapping.min_track_length: must be >= 2" in capsys.readouterr().err
     assert main(["localize", str(image), "--map", str(tmp_path / "none")]) == 1
     assert "not a map" in capsys.readouterr().err
 

@@ -416,7 +416,10 @@ def _build_map(args: argparse.Namespace) -> int:
     gallery = Gallery.load(args.gallery)
     conf = method_conf(args.method)
     mapping = MappingConfig(
-        pairs=args.pairs, num_pairs=args.num_pairs, verification=args.verification
+        pairs=args.pairs,
+        num_pairs=args.num_pairs,
+        verification=args.verification,
+        min_track_length=args.min_track_length,
     )
     out = args.out or default_map_dir("maps", gallery, conf, mapping)
 
@@ -638,6 +641,12 @@ def _add_map_verbs(sub: Any, shared: dict[str, argparse.ArgumentParser]) -> None
         choices=("epipolar", "sampson"),
         default="epipolar",
         help="hloc's epipolar-line test with the known poses, or the Sampson distance",
+    )
+    p.add_argument(
+        "--min-track-length",
+        type=_count,
+        default=2,
+        help="drop points seen in fewer images (2, the paper's: keep every point)",
     )
     p.add_argument("--overwrite", action="store_true", help="recompute cached stages")
     p.set_defaults(func=_build_map)

@@ -144,7 +144,7 @@ def default_changed(was: Any, *, only_with: str | None = None) -> dict[str, Any]
     return {"hash": "omit_value", "omit": was, "only_with": only_with}
 
 
-def _hashed(config: Any) -> Any:
+def hashed_values(config: Any) -> Any:
     """``to_dict`` for hashing: ADDED_OPTION fields at their default are left out, and fields
     whose ``only_with`` field is falsy."""
     if dataclasses.is_dataclass(config) and not isinstance(config, type):
@@ -158,12 +158,12 @@ def _hashed(config: Any) -> Any:
                 continue
             if rule == "omit_value" and value == f.metadata["omit"]:
                 continue
-            out[f.name] = _hashed(value)
+            out[f.name] = hashed_values(value)
         return out
     if isinstance(config, list | tuple):
-        return [_hashed(v) for v in config]
+        return [hashed_values(v) for v in config]
     if isinstance(config, dict):
-        return {str(k): _hashed(v) for k, v in config.items()}
+        return {str(k): hashed_values(v) for k, v in config.items()}
     return config
 
 
@@ -177,7 +177,7 @@ def _default(f: dataclasses.Field) -> Any:
 
 def config_hash(config: Any, length: int = 12) -> str:
     """A stable short hash of a config's resolved values (canonical JSON, SHA-256)."""
-    text = json.dumps(_hashed(config), sort_keys=True, separators=(",", ":"))
+    text = json.dumps(hashed_values(config), sort_keys=True, separators=(",", ":"))
     return hashlib.sha256(text.encode()).hexdigest()[:length]
 
 

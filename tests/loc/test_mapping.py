@@ -219,3 +219,26 @@ def test_a_finished_map_is_returned_untouched_and_one_process_builds_at_a_time(g
 
 def _not_built_yet(out):
     assert not (out / "features.h5").exists()
+
+
+def test_a_minimum_track_length_drops_the_two_view_points_and_rekeys_only_when_set(
+    gallery, sift_map, tmp_path
+):
+    import pycolmap
+
+    from vlocbench.loc.mapping import MappingConfig, default_map_dir
+
+    sift = method_conf("sift")
+    default = default_map_dir(tmp_path, gallery, sift, MappingConfig())
+    assert default_map_dir(tmp_path, gallery, sift, MappingConfig(min_track_length=2)) == default
+    three = MappingConfig(min_track_length=3)
+    assert default_map_dir(tmp_path, gallery, sift, three) != default
+    report = build_map(gallery, sift, tmp_path / "three", three)
+    kept = pycolmap.Reconstruction(tmp_path / "three" / "sfm")
+    built = pycolmap.Reconstruction(sift_map[0] / "sfm")
+    lengths = [p.track.length() for p in built.points3D.values()]
+    assert min(lengths) == 2  # the paper's map keeps two-view points
+    assert report.points == kept.num_points3D() == sum(n >= 3 for n in lengths)
+    assert min(p.track.length() for p in kept.points3D.values()) == 3
+    with pytest.raises(ConfigError, match=r"mapping\.min_track_length"):
+        MappingConfig(min_track_length=1)

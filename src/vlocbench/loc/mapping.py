@@ -32,7 +32,7 @@ from typing import Any, Literal
 import h5py
 import numpy as np
 
-from vlocbench.config import config_hash, require, require_one_of
+from vlocbench.config import ADDED_OPTION, config_hash, hashed_values, require, require_one_of
 from vlocbench.errors import LocalizationError
 from vlocbench.geometry import invert_pose
 from vlocbench.loc.features import Features
@@ -65,6 +65,10 @@ class MappingConfig:
     ``geometric_verification`` with the known poses): a match is kept when each keypoint lies within
     ``epipolar_max_px`` of the other's epipolar line; ``"sampson"`` (vlocbench's option): the
     Sampson distance, which pools both images' errors, within ``epipolar_max_px``.
+    ``min_track_length``: the fewest images a triangulated point must be seen in to stay in the
+    map. 2 (COLMAP's and hloc's) keeps every point; 3 (vlocbench's option) drops the points seen
+    in two images only, whose depth no third view checks: a false match that passes the epipolar
+    check (e.g. between look-alike places that retrieval paired) lies off every surface.
     """
 
     pairs: Literal["retrieval", "poses"] = "retrieval"
@@ -72,12 +76,14 @@ class MappingConfig:
     verification: Literal["epipolar", "sampson"] = "epipolar"
     epipolar_max_px: float = 4.0
     min_triangulation_angle_deg: float = 1.5
+    min_track_length: int = field(default=2, metadata=ADDED_OPTION)
 
     def __post_init__(self) -> None:
         require_one_of(self.pairs, ("retrieval", "poses"), "mapping.pairs")
         require_one_of(self.verification, ("epipolar", "sampson"), "mapping.verification")
         require(self.num_pairs >= 1, "mapping.num_pairs", "must be >= 1")
         require(self.epipolar_max_px > 0, "mapping.epipolar_max_px", "must be > 0")
+        require(self.min_track_length >= 2, "mapping.min_track_length", "must be >= 2 (two views)")
 
 
 @dataclass(frozen=True)
@@ -354,7 +360,7 @@ def _identity(gallery: Gallery, conf: MethodConf, mapping: MappingConfig) -> dic
             {
                 "gallery_identity": gallery.identity,
                 "method": asdict(conf),
-                "mapping": asdict(mapping),
+                "mapping": hashed_values(mapping),  # an added option at its default is left out
                 "stages": stage_params(conf),
             }
         )
@@ -531,6 +537,11 @@ def _build(
     seconds["matching"] = time.perf_counter() - t
     t = time.perf_counter()
     rec = _triangulate(gallery, mapping, features, matches, out)
+    if mapping.min_track_length > 2:
+        short = [i for i, p in rec.points3D.items() if p.track.length() < mapping.min_track_length]
+        for point_id in short:
+            rec.delete_point3D(point_id)
+        rec.write(out / "sfm")
     seconds["triangulation"] = time.perf_counter() - t
     report = MapReport(
         images=len(gallery),
