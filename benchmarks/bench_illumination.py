@@ -111,7 +111,8 @@ def main() -> None:
         shaded = dataclasses.replace(g, conditions=dataclasses.replace(g.conditions, shadows=True))
         plan = resolve(dataclasses.replace(plan.spec, gallery=shaded))
     map_dir = prepare_maps(plan, progress=True)[(args.town, args.method)]
-    town, route = town_named(args.town), route_named(args.town)
+    town = town_named(args.town)
+    route = route_named(args.town, plan.spec.route_length_m)  # the experiment's cut, if any
     camera = dataclasses.replace(plan.spec.gallery.camera, name="query")
     config = dataclasses.replace(plan.spec.methods[0].localizer, retrieval=args.retrieval)
     localizer = VisualLocalizer(map_dir, (camera,), config, name=args.method)

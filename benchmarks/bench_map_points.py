@@ -9,10 +9,12 @@ observe it is within ``--tolerance-m`` or 5 % of the rendered depth, else behind
 the map of ``--town`` and ``--method`` (built under out/cache as an experiment would;
 ``--experiment`` as in ``bench_illumination.py``). It prints the shares by track length and by
 the surface a point's first observation sees (``map_check.surface_kind``: a point off every
-surface was triangulated from matches there, e.g. a ground texture's repeats), then
-localizes ``--queries`` places of the route at noon (as ``bench_illumination.py`` places them)
-with the map as built and with only its on-surface points, and prints T1 / T2 / T3 recall and
-wrong answers of both: what the other points cost. ``--keep DIR`` keeps that second map (a
+surface was triangulated from matches there, e.g. a ground texture's repeats), of each the share
+whose observations see places over 1 m apart (false matches), and how far apart the two cameras
+of each two-view point stand (a pair that joins look-alike places: far). Then it localizes
+``--queries`` places of the route at noon (as ``bench_illumination.py`` places them) with the
+map as built and with only its on-surface points, and prints T1 / T2 / T3 recall and wrong
+answers of both: what the other points cost. ``--keep DIR`` keeps that second map (a
 folder like the map's, its ``sfm/`` without the off-surface points), e.g. to drive with it in
 place of the first.
 """
@@ -77,15 +79,36 @@ def main() -> None:
         check = check_points(rec, gallery, sim.renderer)
         places = check.places(args.tolerance_m)
         counts: dict[str, dict[str, int]] = defaultdict(lambda: dict.fromkeys(PLACES, 0))
+        # points whose observations see places over 1 m apart: false matches, by place
+        apart: dict[str, dict[str, int]] = defaultdict(lambda: dict.fromkeys(PLACES, 0))
         for pid, place in places.items():
             n = rec.points3D[pid].track.length()
-            counts["all"][place] += 1
-            counts["2" if n == 2 else "3-4" if n <= 4 else "5+"][place] += 1
+            for key in ("all", "2" if n == 2 else "3-4" if n <= 4 else "5+"):
+                counts[key][place] += 1
+                apart[key][place] += check.spread_m[pid] > 1.0
         print(f"{args.town}, {args.method}: {map_dir}")
         print(f"{len(places)} points; tolerance {args.tolerance_m} m or 5 % of the depth")
-        print("track length | points | on / behind / in front (%)")
+        print(
+            "track length | points | on / behind / in front (%) | "
+            "of these, seeing places over 1 m apart (%)"
+        )
         for key in ("all", "2", "3-4", "5+"):
-            print(f"{key} | {place_shares(counts[key])}")
+            seen_apart = (100 * apart[key][k] / max(counts[key][k], 1) for k in PLACES)
+            print(
+                f"{key} | {place_shares(counts[key])} | {' / '.join(f'{a:.1f}' for a in seen_apart)}"
+            )
+        # how far apart the two cameras of each two-view point stand, by place: look-alike
+        # places joined by a pair stand far apart
+        baseline_m: dict[str, list[float]] = defaultdict(list)
+        for pid, place in places.items():
+            track = rec.points3D[pid].track
+            if track.length() == 2:
+                a, b = (rec.images[e.image_id].projection_center() for e in track.elements)
+                baseline_m[place].append(float(np.linalg.norm(a - b)))
+        print("two-view points | their cameras apart, median (m) | over 20 m apart (%)")
+        for place in PLACES:
+            d = np.array(baseline_m[place]) if baseline_m[place] else np.full(1, np.nan)
+            print(f"{place} | {np.median(d):.1f} | {100 * np.mean(d > 20):.1f}")
         print("seen on | points | on / behind / in front (%) | of all off-surface points (%)")
         by_surface: dict[str, dict[str, int]] = defaultdict(lambda: dict.fromkeys(PLACES, 0))
         for pid, place in places.items():
@@ -108,7 +131,7 @@ def main() -> None:
             }
             errors: dict[str, list[tuple[float, float]]] = {k: [] for k in maps}
             sim.set_conditions(Conditions())
-            xy, yaws = route_queries(route_named(args.town), args.queries)
+            xy, yaws = route_queries(route_named(args.town, plan.spec.route_length_m), args.queries)
             for (x, y), h in zip(xy, yaws):
                 sim.teleport(float(x), float(y), float(h))
                 truth = planar_pose(float(x), float(y), float(h))

@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from bench_illumination import route_queries
 from vlocbench.bench.experiment import load_experiment
 from vlocbench.bench.preparation import prepare_gallery
 from vlocbench.bench.towns import route_named, town_named
@@ -63,11 +64,8 @@ def main() -> None:
     print(
         f"{args.town}: {len(images)} gallery images described in {time.perf_counter() - t0:.0f} s"
     )
-    route = route_named(args.town)
     camera = dataclasses.replace(plan.spec.gallery.camera, name="query")
-    s = np.round(np.linspace(10.0, route.length_m - 10.0, args.queries) / 2.0) * 2.0 + 1.0
-    xy = np.stack([np.interp(s, route.s_m, route.xy[:, i]) for i in (0, 1)], 1)
-    yaws = np.interp(s, route.s_m, np.unwrap(route.yaw_rad))
+    xy, yaws = route_queries(route_named(args.town, plan.spec.route_length_m), args.queries)
     if args.setups:
         levels = [(s.label, s.conditions) for s in load_experiment(args.setups).setups]
     else:

@@ -29,6 +29,16 @@ def test_points_are_placed_on_behind_or_in_front_of_the_surfaces_their_cameras_s
     on = [pid for pid, place in check.places().items() if place == "on"]
     seen_off_m = [np.linalg.norm(check.seen_xyz_m[pid] - rec.points3D[pid].xyz) for pid in on]
     assert np.median(seen_off_m) < 0.05, np.median(seen_off_m)
+    # and its observations see one place
+    assert np.median([check.spread_m[pid] for pid in on]) < 0.1
+
+    # a false match: one observation of a point moved 40 px along its image row, as a window
+    # matched with its repeat would be, sees another place
+    pid = next(p for p in on if rec.points3D[p].track.length() == 2 and check.spread_m[p] < 0.1)
+    element = rec.points3D[pid].track.elements[1]
+    rec.images[element.image_id].points2D[element.point2D_idx].xy += np.array([40.0, 0.0])
+    assert check_points(rec, gallery, small_sim.renderer).spread_m[pid] > 0.5
+    rec.images[element.image_id].points2D[element.point2D_idx].xy -= np.array([40.0, 0.0])
 
     # a point pushed away from the first camera that sees it, or pulled towards it, along the
     # ray: it still projects where it did in that camera, but no longer lies on the surface

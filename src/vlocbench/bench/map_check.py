@@ -32,11 +32,14 @@ class PointCheck:
     depth at the observing keypoint (``offset_m``), and that rendered depth (``surface_m``), in
     metres along each observing camera's optical axis; ``seen_xyz_m``: the world point (3,) its
     first observation sees, on the rendered surface (what a point off every surface was
-    triangulated from)."""
+    triangulated from); ``spread_m``: the greatest distance between the surface points its
+    observations see (near 0 for a point matched right; a false match, e.g. between look-alike
+    facades of two streets, sees places metres apart)."""
 
     offset_m: dict[int, float]
     surface_m: dict[int, float]
     seen_xyz_m: dict[int, NDArray[np.float64]]
+    spread_m: dict[int, float]
 
     def places(self, tolerance_m: float = 0.5, relative: float = 0.05) -> dict[int, str]:
         """Each point's place: "on" its surface when the offset is within ``tolerance_m`` or
@@ -59,7 +62,7 @@ def check_points(
     """Compare every 3D point of a map's ``reconstruction`` with the scene the ``renderer`` draws
     at the poses of ``gallery``'s images (the map's gallery): one depth render per image."""
     seen: dict[int, list[tuple[float, float]]] = defaultdict(list)
-    seen_xyz: dict[int, NDArray[np.float64]] = {}
+    seen_xyz: dict[int, list[NDArray[np.float64]]] = defaultdict(list)
     entries = {im.name: im for im in gallery.images}
     missing = sorted(im.name for im in reconstruction.images.values() if im.name not in entries)
     if missing:
@@ -82,16 +85,22 @@ def check_points(
                 xyz = reconstruction.points3D[pid].xyz
                 z = float(cam_from_world[2, :3] @ xyz + cam_from_world[2, 3])
                 seen[pid].append((z - surface_m, surface_m))
-                if pid not in seen_xyz:
-                    ray = cam_from_px @ np.append(p2.xy - 0.5, 1.0)
-                    seen_xyz[pid] = entry.world_from_cam[:3, :3] @ ray * surface_m
-                    seen_xyz[pid] += entry.world_from_cam[:3, 3]
+                ray = cam_from_px @ np.append(p2.xy - 0.5, 1.0)
+                seen_xyz[pid].append(
+                    entry.world_from_cam[:3, :3] @ ray * surface_m + entry.world_from_cam[:3, 3]
+                )
     medians = {pid: np.median(np.array(obs), axis=0) for pid, obs in seen.items()}
     return PointCheck(
         {pid: float(m[0]) for pid, m in medians.items()},
         {pid: float(m[1]) for pid, m in medians.items()},
-        seen_xyz,
+        {pid: xyz[0] for pid, xyz in seen_xyz.items()},
+        {pid: _spread_m(np.array(xyz)) for pid, xyz in seen_xyz.items()},
     )
+
+
+def _spread_m(xyz_m: NDArray[np.float64]) -> float:
+    """The greatest distance between any two of the points (N, 3)."""
+    return float(np.max(np.linalg.norm(xyz_m[:, None] - xyz_m[None], axis=-1)))
 
 
 SURFACES = ("trees", "walls and above", "grass", "paving", "road and open ground")
