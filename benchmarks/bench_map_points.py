@@ -81,11 +81,18 @@ def main() -> None:
         counts: dict[str, dict[str, int]] = defaultdict(lambda: dict.fromkeys(PLACES, 0))
         # points whose observations see places over 1 m apart: false matches, by place
         apart: dict[str, dict[str, int]] = defaultdict(lambda: dict.fromkeys(PLACES, 0))
+        # how far apart the two cameras of each two-view point stand, by place: look-alike
+        # places joined by a pair stand far apart
+        baseline_m: dict[str, list[float]] = {place: [] for place in PLACES}
         for pid, place in places.items():
-            n = rec.points3D[pid].track.length()
+            track = rec.points3D[pid].track
+            n = track.length()
             for key in ("all", "2" if n == 2 else "3-4" if n <= 4 else "5+"):
                 counts[key][place] += 1
                 apart[key][place] += check.spread_m[pid] > 1.0
+            if n == 2:
+                a, b = (rec.images[e.image_id].projection_center() for e in track.elements)
+                baseline_m[place].append(float(np.linalg.norm(a - b)))
         print(f"{args.town}, {args.method}: {map_dir}")
         print(f"{len(places)} points; tolerance {args.tolerance_m} m or 5 % of the depth")
         print(
@@ -97,18 +104,10 @@ def main() -> None:
             print(
                 f"{key} | {place_shares(counts[key])} | {' / '.join(f'{a:.1f}' for a in seen_apart)}"
             )
-        # how far apart the two cameras of each two-view point stand, by place: look-alike
-        # places joined by a pair stand far apart
-        baseline_m: dict[str, list[float]] = defaultdict(list)
-        for pid, place in places.items():
-            track = rec.points3D[pid].track
-            if track.length() == 2:
-                a, b = (rec.images[e.image_id].projection_center() for e in track.elements)
-                baseline_m[place].append(float(np.linalg.norm(a - b)))
         print("two-view points | their cameras apart, median (m) | over 20 m apart (%)")
-        for place in PLACES:
-            d = np.array(baseline_m[place]) if baseline_m[place] else np.full(1, np.nan)
-            print(f"{place} | {np.median(d):.1f} | {100 * np.mean(d > 20):.1f}")
+        for place, d in baseline_m.items():
+            if d:
+                print(f"{place} | {np.median(d):.1f} | {100 * np.mean(np.array(d) > 20):.1f}")
         print("seen on | points | on / behind / in front (%) | of all off-surface points (%)")
         by_surface: dict[str, dict[str, int]] = defaultdict(lambda: dict.fromkeys(PLACES, 0))
         for pid, place in places.items():
