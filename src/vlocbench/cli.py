@@ -308,13 +308,15 @@ def _signals_interrupt() -> Iterator[None]:
 
 
 def _report(args: argparse.Namespace) -> int:
-    from vlocbench.bench.report import write_report
+    from vlocbench.bench.report import not_stored_line, write_report
     from vlocbench.bench.store import count_episodes
 
     files = write_report(args.output, examples=not args.no_examples, plan=args.experiment)
     print(
         f"{files.summary.episodes} of the {files.summary.planned} episodes of {files.summary.plan.name}"
     )
+    if line := not_stored_line(files.summary):
+        print(line)
     if args.experiment:
         # after a changed setting or definition (new keys) the older episodes stay in the store
         others = count_episodes(args.output) - files.summary.episodes

@@ -84,3 +84,25 @@ def test_a_rerun_under_a_new_episode_version_reports_only_its_own_episodes(tmp_p
     assert {r.key for r in rows} == keys and len(read_episodes(tmp_path)) == 2 * len(keys)
     summary = summarize(plan_from_stored(stored), rows)
     assert summary.episodes == summary.planned == len(keys)
+
+
+def test_a_run_in_parts_reports_the_towns_and_methods_it_has_and_names_the_rest(tmp_path):
+    """`vlocbench run --towns town10 --methods sift` into a two-town, two-method experiment: the
+    summary holds town10 and sift, and says that town01, orb-teblid and the odometry line have none."""
+    from vlocbench.bench.report import not_stored_line
+
+    spec = load_experiment(
+        {**ILL_SPEC, "towns": ["town01", "town10"], "methods": ["sift", "orb-teblid"]}
+    )
+    run_fake_plans(tmp_path, spec)
+    _, rows = read_latest_run(tmp_path)
+    part = [r for r in rows if r.town == "town10" and r.method == "sift"]
+    assert part and len(part) < len(rows)
+    summary = summarize(spec, part)
+    assert summary.towns == ("town10",) and summary.methods == ("sift",)
+    assert summary.towns_not_stored == ("town01",)
+    assert summary.methods_not_stored == ("orb-teblid", "odometry")
+    line = not_stored_line(summary)
+    assert line.startswith("nothing stored yet for town01, orb-teblid, odometry only")
+    whole = summarize(spec, rows)
+    assert whole.towns == ("town01", "town10") and not not_stored_line(whole)

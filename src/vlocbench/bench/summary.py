@@ -64,9 +64,11 @@ class Cell:
 @dataclass(frozen=True, kw_only=True)
 class Summary:
     plan: ExperimentPlan
-    towns: tuple[str, ...]  # as given in the experiment (names or YAML paths)
+    # the experiment's towns (as given: names or YAML paths) and methods (then BASELINE when the
+    # plan has it) with an episode stored; all of them when none has
+    towns: tuple[str, ...]
     town_names: dict[str, str]  # as given -> the town's name
-    methods: tuple[str, ...]  # the experiment's methods, then BASELINE when it ran
+    methods: tuple[str, ...]
     setups: tuple[Setup, ...]
     axis: tuple[str, ...]  # the swept keys
     cells: dict[tuple[str, str, str], Cell]  # (town, method, setup label)
@@ -77,6 +79,16 @@ class Summary:
     @property
     def spec(self) -> ExperimentSpec:
         return self.plan.spec
+
+    @property
+    def towns_not_stored(self) -> tuple[str, ...]:
+        """The names of the plan's towns with no episode stored (left out of the tables)."""
+        return tuple(self.town_names[t] for t in self.spec.towns if t not in self.towns)
+
+    @property
+    def methods_not_stored(self) -> tuple[str, ...]:
+        """The plan's methods (BASELINE among them) with no episode stored in any town."""
+        return tuple(m for m in _planned_methods(self.spec) if m not in self.methods)
 
     def cell(self, town: str, method: str, setup: str) -> Cell | None:
         return self.cells.get((town, method, setup))
@@ -94,6 +106,10 @@ class Summary:
         if all(isinstance(v, int | float) and not isinstance(v, bool) for v in values):
             return [float(v) for v in values]
         return None
+
+
+def _planned_methods(spec: ExperimentSpec) -> tuple[str, ...]:
+    return tuple(m.name for m in spec.methods) + ((BASELINE,) if spec.baseline else ())
 
 
 def _stored_cells(
@@ -186,11 +202,15 @@ def summarize(plan: ExperimentPlan, rows: Sequence[EpisodeRow]) -> Summary:
                 errors_by[cell] += 1
     cells = {key: _cell(key, group, errors_by.get(key, 0)) for key, group in by.items()}
     spec = plan.spec
-    methods = tuple(m.name for m in spec.methods) + ((BASELINE,) if spec.baseline else ())
+    planned_methods = _planned_methods(spec)
     town_names = {t: t for t in spec.towns} | {r.config["town"]: r.town for r in rows}
+    # a run in parts (--towns, --methods) reports what it has; a store with nothing, the plan
+    stored = {*by, *errors_by}
+    towns = tuple(t for t in spec.towns if any(c[0] == t for c in stored)) or spec.towns
+    methods = tuple(m for m in planned_methods if any(c[1] == m for c in stored)) or planned_methods
     return Summary(
         plan=plan,
-        towns=spec.towns,
+        towns=towns,
         town_names=town_names,
         methods=methods,
         setups=plan.setups,

@@ -36,6 +36,7 @@ from vlocbench.bench.report.tables import (
     fragmentation_table,
     latex,
     markdown,
+    not_stored_line,
     per_town_table,
     place_recall_table,
     ranking_table,
@@ -54,7 +55,14 @@ from vlocbench.bench.store import EpisodeRow, StoreError, read_episode_table
 from vlocbench.bench.summary import Summary, summarize
 
 REPORT_DIR = "report"
-__all__ = ["REPORT_DIR", "ReportFiles", "paper_comparison_tables", "summary_lines", "write_report"]
+__all__ = [
+    "REPORT_DIR",
+    "ReportFiles",
+    "not_stored_line",
+    "paper_comparison_tables",
+    "summary_lines",
+    "write_report",
+]
 
 
 @dataclass(frozen=True)
@@ -128,7 +136,7 @@ def report_tables(summary: Summary, drives: DriveFigures | None = None) -> list[
                 cause_table(summary, town),
             )
         )
-        if summary.spec.recall and summary.spec.methods:
+        if any(c.recall is not None for (t, _, _), c in summary.cells.items() if t == town):
             out.append(
                 (
                     f"{name}: recall (%) at (0.25 m, 2°) / (0.5 m, 5°) / (5 m, 10°) on 6-DoF "
@@ -189,7 +197,8 @@ def report_tables(summary: Summary, drives: DriveFigures | None = None) -> list[
                 fragmentation_table(summary, town),
             )
         )
-    return out + towns_tables(summary) + paper_comparison_tables(summary)
+    tables = out + towns_tables(summary) + paper_comparison_tables(summary)
+    return [(caption, table) for caption, table in tables if table[1]]  # a table without rows
 
 
 def towns_tables(summary: Summary) -> list[tuple[str, Table]]:

@@ -17,7 +17,7 @@ import matplotlib
 matplotlib.use("Agg")
 import numpy as np
 
-from vlocbench.bench.report.tables import Table, method_label
+from vlocbench.bench.report.tables import Table, method_label, not_stored_line
 from vlocbench.bench.store import EpisodeRow
 from vlocbench.bench.summary import Summary
 from vlocbench.bench.view import VIEW_DIR
@@ -155,6 +155,7 @@ def write_page(
             errors=len(summary.errors),
             spec_hash=spec.spec_hash,
             towns=html.escape(", ".join(summary.town_names[t] for t in summary.towns)),
+            not_stored=html.escape(f" ({line})" if (line := not_stored_line(summary)) else ""),
             methods=html.escape(", ".join(m.name for m in spec.methods) or "none"),
             setups=len(summary.setups),
             repetitions=spec.repetitions,

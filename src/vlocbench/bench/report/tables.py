@@ -43,6 +43,12 @@ def method_label(method: str) -> str:
     return "odometry only" if method == BASELINE else method
 
 
+def not_stored_line(summary: Summary) -> str:
+    """What of the plan the report leaves out for want of a stored episode ('' when nothing)."""
+    names = [*summary.towns_not_stored, *map(method_label, summary.methods_not_stored)]
+    return f"nothing stored yet for {', '.join(names)}: not in this report" if names else ""
+
+
 def fmt(value: float, digits: int = 1) -> str:
     return "–" if value is None or not np.isfinite(value) else f"{value:.{digits}f}"
 
