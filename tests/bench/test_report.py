@@ -67,3 +67,18 @@ def test_a_sweep_run_in_parts_is_reported_whole(tmp_path, capsys):
     (tmp_path / "t01.yaml").write_text(yaml.safe_dump({**whole, "towns": ["town01"]}))
     assert main(["report", str(tmp_path), "--experiment", str(tmp_path / "t01.yaml")]) == 1
     assert "holds no episode of experiment 'ill'" in capsys.readouterr().err
+
+
+def test_a_sweep_stored_in_part_has_a_verdict_over_its_stored_levels(tmp_path):
+    """Three levels planned, the easiest and the hardest run (as the paper's six of eleven): the
+    verdict reads over those two, and the odometry line is crossed nowhere (the fakes' sift
+    fails at most once, odometry three times); without the odometry line stored, unknown."""
+    from vlocbench.bench.report import write_report
+
+    whole = load_experiment({**ILL_SPEC, "sweep": {"illumination.k": [0, 6, 8]}})
+    for folder, baseline, crossed in (("with", True, "never"), ("without", False, "–")):
+        parts = {**ILL_SPEC, "sweep": {"illumination.k": [0, 8]}, "baseline": baseline}
+        run_fake_plans(tmp_path / folder, load_experiment(parts))
+        md = write_report(tmp_path / folder, examples=False, plan=whole).markdown.read_text()
+        verdict = md.split("verdict, over illumination.k")[1].split("\n\n**")[0]
+        assert f"| sift | k=8 | {crossed} |" in verdict, folder

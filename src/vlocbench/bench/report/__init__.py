@@ -116,9 +116,9 @@ def report_tables(summary: Summary, drives: DriveFigures | None = None) -> list[
         if summary.spec.methods and summary.spec.baseline and len(summary.axis) == 1:
             out.append(
                 (
-                    f"{name}: verdict, over {summary.axis[0]} from easy to hard: how far each "
-                    "method keeps F at most 1 /km, and from where it crashes more often than "
-                    "odometry alone",
+                    f"{name}: verdict, over {summary.axis[0]} from easy to hard (the levels "
+                    "with stored failure episodes): how far each method keeps F at most 1 /km, "
+                    "and from where it crashes more often than odometry alone",
                     verdict_table(summary, town),
                 )
             )

@@ -319,9 +319,10 @@ def confidence_table(summary: Summary, town: str, curves: Curves) -> Table:
 
 def verdict_table(summary: Summary, town: str) -> Table:
     """A line per method over the one swept factor (its levels from easy to hard, as the
-    experiment lists them): the hardest level up to which F stays at most 1 /km, and the first
-    where it is above the odometry line. A method the sweep leaves alone (the same episodes at
-    every level, as a real method beside a swept oracle) has no line."""
+    experiment lists them; those without its failure episodes stored are skipped): the hardest
+    level up to which F stays at most 1 /km, and the first where it is above the odometry line.
+    A method the sweep leaves alone (the same episodes at every level, as a real method beside a
+    swept oracle) has no line."""
     header = ["method", "F <= 1 /km up to", "worse than odometry only from"]
     if len(summary.axis) != 1:
         return header, []
@@ -332,18 +333,21 @@ def verdict_table(summary: Summary, town: str) -> Table:
         means = [summary.failure_mean(town, method, label) for label in labels]
         cells = [summary.cell(town, method, label) for label in labels]
         left_alone = len(labels) > 1 and len({c.keys for c in cells if c}) == 1
-        if not np.isfinite(means).all() or left_alone:
+        stored = [k for k, m in enumerate(means) if np.isfinite(m)]
+        if not stored or left_alone:
             continue
         ok = 0
-        while ok < len(means) and means[ok] <= 1.0:
+        while ok < len(stored) and means[stored[ok]] <= 1.0:
             ok += 1
-        # NaN where the odometry line was not driven: never crossed there
-        cross = next((k for k, (m, o) in enumerate(zip(means, odometry)) if m > o), None)
+        beside = [k for k in stored if np.isfinite(odometry[k])]  # the odometry line driven
+        cross = next((k for k in beside if means[k] > odometry[k]), None)
         rows.append(
             [
                 method,
-                setup_header(summary, labels[ok - 1]) if ok else "not even the first level",
-                setup_header(summary, labels[cross]) if cross is not None else "never",
+                setup_header(summary, labels[stored[ok - 1]]) if ok else "not even the first level",
+                setup_header(summary, labels[cross])
+                if cross is not None
+                else ("never" if beside else "–"),
             ]
         )
     return header, rows
