@@ -90,6 +90,7 @@ def test_a_run_in_parts_reports_the_towns_and_methods_it_has_and_names_the_rest(
     """`vlocbench run --towns town10 --methods sift` into a two-town, two-method experiment: the
     summary holds town10 and sift, and says that town01, orb-teblid and the odometry line have none."""
     from vlocbench.bench.report import not_stored_line
+    from vlocbench.bench.report.page import write_page
 
     spec = load_experiment(
         {**ILL_SPEC, "towns": ["town01", "town10"], "methods": ["sift", "orb-teblid"]}
@@ -104,5 +105,7 @@ def test_a_run_in_parts_reports_the_towns_and_methods_it_has_and_names_the_rest(
     assert summary.methods_not_stored == ("orb-teblid", "odometry")
     line = not_stored_line(summary)
     assert line.startswith("nothing stored yet for town01, orb-teblid, odometry only")
+    page = write_page(summary, part, [], [], False, tmp_path).read_text()
+    assert "towns: town10 (nothing stored yet for town01" in page and "methods: sift;" in page
     whole = summarize(spec, rows)
     assert whole.towns == ("town01", "town10") and not not_stored_line(whole)

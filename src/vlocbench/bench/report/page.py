@@ -19,7 +19,7 @@ import numpy as np
 
 from vlocbench.bench.report.tables import Table, method_label, not_stored_line
 from vlocbench.bench.store import EpisodeRow
-from vlocbench.bench.summary import Summary
+from vlocbench.bench.summary import BASELINE, Summary
 from vlocbench.bench.view import VIEW_DIR
 
 logger = logging.getLogger(__name__)
@@ -156,7 +156,7 @@ def write_page(
             spec_hash=spec.spec_hash,
             towns=html.escape(", ".join(summary.town_names[t] for t in summary.towns)),
             not_stored=html.escape(f" ({line})" if (line := not_stored_line(summary)) else ""),
-            methods=html.escape(", ".join(m.name for m in spec.methods) or "none"),
+            methods=html.escape(", ".join(m for m in summary.methods if m != BASELINE) or "none"),
             setups=len(summary.setups),
             repetitions=spec.repetitions,
             tables="\n".join(
