@@ -106,7 +106,7 @@ def from_dict(cls: type[T], data: Any, field: str = "") -> T:
     kwargs = {}
     for key, value in data.items():
         if key not in fields:
-            raise UnknownNameError(f"key in {name}", str(key), fields)
+            raise UnknownNameError("key", str(key), fields, field=name)
         kwargs[key] = _convert(value, hints[key], f"{name}.{key}" if field else key)
     try:
         return cls(**kwargs)

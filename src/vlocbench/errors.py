@@ -35,18 +35,22 @@ class ConfigError(VlocbenchError, ValueError):
 class UnknownNameError(ConfigError, KeyError):
     """A name (town, method, season, ...) is not one of the valid choices; the message lists them."""
 
-    def __init__(self, kind: str, name: str, valid: Iterable[str]) -> None:
+    def __init__(
+        self, kind: str, name: str, valid: Iterable[str], field: str | None = None
+    ) -> None:
+        """``field``: where the name was given (``methods[0].localizer`` for an unknown key);
+        the kind of name itself when left out."""
         self.kind = kind
         self.name = name
         self.valid = sorted(valid)
         sep = "; " if any(", " in v for v in self.valid) else ", "  # names with commas: setups
-        super().__init__(kind, f"unknown {kind} {name!r}; valid: {sep.join(self.valid)}")
+        super().__init__(field or kind, f"unknown {kind} {name!r}; valid: {sep.join(self.valid)}")
 
     def __str__(self) -> str:  # KeyError would otherwise quote the message
         return self.args[0]
 
     def __reduce__(self) -> tuple[type, tuple[Any, ...]]:
-        return type(self), (self.kind, self.name, self.valid)
+        return type(self), (self.kind, self.name, self.valid, self.field)
 
 
 class RenderBackendError(MachineError):
