@@ -1,6 +1,6 @@
 import pytest
 
-from vlocbench.config import config_hash, from_dict
+from vlocbench.config import config_hash, from_dict, hashed_values
 from vlocbench.errors import ConfigError, UnknownNameError
 from vlocbench.sim import Conditions, Exposure, Illumination, Intrinsics, Weather
 
@@ -9,6 +9,18 @@ def test_illumination_halves_intensity_and_elevation():
     a, b = Illumination(k=0), Illumination(k=2)
     assert b.sun_intensity == pytest.approx(a.sun_intensity / 4)
     assert b.sun_elevation_rad == pytest.approx(a.sun_elevation_rad / 4)
+
+
+def test_the_lights_own_clouds_follow_the_suns_intensity():
+    assert Conditions(illumination=Illumination(k=2)).overcast == 0.0
+    clouded = Illumination(k=2, cloud_cover="from_intensity")
+    assert Conditions(illumination=clouded).overcast == pytest.approx(0.75)
+    assert Conditions(illumination=Illumination(k=0, cloud_cover="from_intensity")).overcast == 0
+    heavier = Conditions(illumination=clouded, weather=Weather(overcast=0.9))
+    assert heavier.overcast == pytest.approx(0.9)
+    # an option added after results were stored: at its default, no key changes
+    assert config_hash(Illumination(k=2)) != config_hash(clouded)
+    assert "cloud_cover" not in str(hashed_values(Illumination(k=2)))
 
 
 def test_bad_values_name_their_field():
@@ -38,6 +50,11 @@ def test_bad_values_name_their_field():
         Weather(fog_model="haze")  # type: ignore[arg-type]
     with pytest.raises(UnknownNameError, match="valid: auto, fixed"):
         from_dict(Conditions, {"exposure": {"mode": "manual"}})
+    with pytest.raises(
+        UnknownNameError,
+        match=r"^illumination: unknown cloud cover 'overcast'; valid: clear, from_intensity$",
+    ):
+        Illumination(cloud_cover="overcast")
 
 
 def test_from_dict_builds_nested_conditions_and_hashes_stably():

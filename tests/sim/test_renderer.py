@@ -336,3 +336,15 @@ def test_depth_is_the_distance_along_the_optical_axis_to_the_scene(small_sim):
     up[:3, :3] = np.diag([1.0, 1.0, 1.0])  # optical axis +z
     up[2, 3] = 200.0  # above every roof
     assert np.all(small_sim.renderer.render_depth(up, 64, 48, 30.0) > 1000)
+
+
+def test_clouds_from_the_suns_intensity_render_as_that_overcast(small_sim):
+    """scenario_runner's cover (1 - I, 94 % at k = 4) is the weather's overcast at that cover."""
+    clouded = Illumination(k=4, cloud_cover="from_intensity")
+    a = render(small_sim, Conditions(illumination=clouded)).image
+    b = render(
+        small_sim, Conditions(illumination=Illumination(k=4), weather=Weather(overcast=0.9375))
+    ).image
+    clear = render(small_sim, Conditions(illumination=Illumination(k=4))).image
+    assert a.tobytes() == b.tobytes()
+    assert np.abs(a.astype(int) - clear.astype(int)).mean() > 1.0

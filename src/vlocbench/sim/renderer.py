@@ -65,8 +65,8 @@ def sky_colors(c: Conditions, brightness: float) -> tuple[NDArray, NDArray]:
     )
     horizon = np.array([0.75, 0.82, 0.92]) * (1 - dusk) + np.array([0.95, 0.62, 0.38]) * dusk
     grey = np.array([0.62, 0.64, 0.67])
-    zenith = zenith * (1 - w.overcast) + grey * w.overcast
-    horizon = horizon * (1 - w.overcast) + grey * 1.05 * w.overcast
+    zenith = zenith * (1 - c.overcast) + grey * c.overcast
+    horizon = horizon * (1 - c.overcast) + grey * 1.05 * c.overcast
     if w.fog_visual_range_m is not None:
         fog = fog_color(c, brightness)
         # the sky lies beyond any fog that starts at a distance; exponential fog leaves some blue
@@ -116,7 +116,9 @@ class Renderer:
         )
         dusk = float(np.clip(1 - elevation / np.radians(15), 0, 1))
         sun_color = np.array([1.0, 0.97, 0.92]) * (1 - dusk) + np.array([1.0, 0.7, 0.45]) * dusk
-        light = daylight(ill.sun_intensity, elevation, w.overcast, ill.sun_elevation_base_rad)
+        light = daylight(
+            ill.sun_intensity, elevation, conditions.overcast, ill.sun_elevation_base_rad
+        )
         h = conditions.headlights
         e = conditions.exposure
         noon = daylight(1.0, ill.sun_elevation_base_rad, 0.0, ill.sun_elevation_base_rad)
