@@ -203,7 +203,9 @@ def test_cli_run_and_report_errors(tiny, tmp_path, capsys):
     assert main(["report", str(tmp_path / "empty")]) == 1
     assert "holds no vlocbench results" in capsys.readouterr().err
     assert main(["report", str(root / "out"), "--no-examples"]) == 0
-    assert "index.html" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "index.html" in out
+    assert "small:\n| method | k=0 | k=6 |" in out  # the failure table, as a run prints it
     assert os.path.exists(root / "out" / "report" / "tables.md")
     # a part of the run again (all done: only its report), in a copy of the store
     shutil.copytree(root / "out", tmp_path / "copy")

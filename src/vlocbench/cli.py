@@ -308,10 +308,11 @@ def _signals_interrupt() -> Iterator[None]:
 
 
 def _report(args: argparse.Namespace) -> int:
-    from vlocbench.bench.report import not_stored_line, write_report
+    from vlocbench.bench.report import not_stored_line, summary_lines, write_report
     from vlocbench.bench.store import count_episodes
 
     files = write_report(args.output, examples=not args.no_examples, plan=args.experiment)
+    print("\n".join(summary_lines(files.summary)))  # as a run ends: each town's F table
     print(
         f"{files.summary.episodes} of the {files.summary.planned} episodes of {files.summary.plan.name}"
     )
