@@ -194,3 +194,43 @@ def test_the_device_is_auto_cpu_or_cuda(monkeypatch):
     if not torch.cuda.is_available():
         with pytest.raises(ConfigError, match="sees no GPU"):
             resolve_device("cuda")
+
+
+def test_a_learned_maps_pairs_matched_in_a_pool_are_the_drivers_matches(
+    offline, gallery, tmp_path_factory, monkeypatch
+):
+    """A single map build spreads its LighterGlue pairs over pool processes: chunk by chunk, each
+    pair on one thread, so the matches (and the map) are those of the build in one process."""
+    import concurrent.futures as cf
+    import multiprocessing
+
+    import h5py
+
+    from vlocbench.loc import mapping
+    from vlocbench.loc.gallery import GalleryWriter
+    from vlocbench.loc.registry import method_conf
+
+    tmp_path = tmp_path_factory.mktemp("pooled")  # the offline check owns tmp_path
+    writer = GalleryWriter(tmp_path / "gallery")
+    for name in gallery.names[:10]:
+        im = gallery.images[gallery.index_of(name)]
+        writer.add(
+            name, gallery.load_image(name), im.camera, gallery.cameras[im.camera], im.world_from_cam
+        )
+    small = writer.close()
+    conf, pairs = method_conf("xfeat-lighterglue"), mapping.MappingConfig(num_pairs=3)
+    assert mapping.pools_matching(conf) and not mapping.pools_matching(method_conf("sift"))
+    monkeypatch.setattr(mapping, "MATCH_CHUNK", 4)  # several chunks in flight at once
+    alone = mapping.build_map(small, conf, tmp_path / "alone", pairs)
+    spawn = multiprocessing.get_context("spawn")
+    with cf.ProcessPoolExecutor(2, mp_context=spawn) as executor:
+        pooled = mapping.build_map(
+            small, conf, tmp_path / "pooled", pairs, pool=mapping.MatchPool(executor, 2)
+        )
+    assert pooled.points == alone.points > 100 and pooled.pairs == alone.pairs
+    with (
+        h5py.File(tmp_path / "alone" / "matches.h5") as a,
+        h5py.File(tmp_path / "pooled" / "matches.h5") as b,
+    ):
+        assert sorted(a) == sorted(b) and len(a) == alone.pairs
+        assert all(np.array_equal(a[k][()], b[k][()]) for k in a)

@@ -7,7 +7,8 @@ from __future__ import annotations
 import concurrent.futures as cf
 import logging
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -18,7 +19,14 @@ from vlocbench.bench.methods import MethodSpec
 from vlocbench.bench.progress import Progress, unit_of
 from vlocbench.bench.towns import route_named, town_named
 from vlocbench.loc.gallery import GALLERY_FILE, Gallery
-from vlocbench.loc.mapping import MAP_FILE, MappingConfig, build_map, default_map_dir
+from vlocbench.loc.mapping import (
+    MAP_FILE,
+    MappingConfig,
+    MatchPool,
+    build_map,
+    default_map_dir,
+    pools_matching,
+)
 from vlocbench.locks import building
 from vlocbench.sim import Simulator
 
@@ -78,6 +86,9 @@ def prepare_maps(
             todo = list(
                 {j[-1]: j for j in jobs.values() if not (j[-1] / MAP_FILE).exists()}.values()
             )
+            if len(todo) == 1 and pools_matching(todo[0][2].conf):  # its pairs on every worker
+                with _pool(workers) as pool:
+                    _map(*todo[0], bars, MatchPool(pool, workers))
             _in_parallel(_map_job, todo, workers, bars, "maps")
         return {key: str(_map(*job, bars)) for key, job in jobs.items()}
     finally:
@@ -106,12 +117,19 @@ def _in_parallel(
     if len(args) < 2:
         return  # one job runs in the driver, with every thread
     logger.info(f"{len(args)} {stage} to make, {min(workers, len(args))} at a time")
-    pool = local_pool(min(workers, len(args)))
-    try:
+    with _pool(min(workers, len(args))) as pool:
         futures = [pool.submit(job, *a) for a in args]
         for n, future in enumerate(cf.as_completed(futures), 1):
             future.result()
             bars(stage, n, len(args))
+
+
+@contextmanager
+def _pool(workers: int) -> Iterator[cf.ProcessPoolExecutor]:
+    """``workers`` pool processes (one thread each); a failure or an interruption kills them."""
+    pool = local_pool(workers)
+    try:
+        yield pool
     except BaseException:
         kill_workers(pool)
         raise
@@ -163,8 +181,10 @@ def _map(
     mapping: MappingConfig,
     map_dir: Path,
     bars: StageBars,
+    pool: MatchPool | None = None,
 ) -> Path:
-    """The map of ``method`` on the town's ``gallery`` in ``map_dir``, built unless it is there."""
+    """The map of ``method`` on the town's ``gallery`` in ``map_dir``, built unless it is there
+    (``pool``: processes that match its pairs)."""
     name = town_named(town_name).name
     if not (map_dir / MAP_FILE).exists():
         logger.info(f"{name}: building the {method.name} map in {map_dir}")
@@ -175,6 +195,7 @@ def _map(
         map_dir,
         mapping,
         progress=lambda stage, done, total: bars(f"{label} {stage}", done, total),
+        pool=pool,
     )
     logger.info(f"{name}: {method.name} map: {report.images} images, {report.points} points")
     return map_dir

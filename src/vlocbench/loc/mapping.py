@@ -23,7 +23,9 @@ import json
 import re
 import shutil
 import time
+from collections import deque
 from collections.abc import Callable, Iterator
+from concurrent.futures import Executor, Future
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -37,13 +39,14 @@ from vlocbench.errors import LocalizationError
 from vlocbench.geometry import invert_pose
 from vlocbench.loc.features import Features
 from vlocbench.loc.gallery import CameraModel, Gallery, GalleryWriter
-from vlocbench.loc.matchers import match_pairs
+from vlocbench.loc.matchers import Matcher, match_pairs
 from vlocbench.loc.native import pycolmap, quiet_pycolmap
 from vlocbench.loc.registry import (
     MethodConf,
     build_features,
     build_matcher,
     build_retrieval,
+    matcher_class,
     stage_params,
 )
 from vlocbench.loc.retrieval import nearest_poses, top_k
@@ -302,6 +305,33 @@ def _pairs(
     return [(names[i], names[j]) for i, j in sorted(seen)]
 
 
+def pools_matching(conf: MethodConf) -> bool:
+    """Whether a :class:`MatchPool` matches this method's map: a network matcher (``match_many``),
+    whose passes run on one thread in any process (the same matches), and slowly; the
+    nearest-neighbour matchers are fast, and their matrix products follow BLAS's threads."""
+    return hasattr(matcher_class(conf.matcher), "match_many")
+
+
+@dataclass(frozen=True)
+class MatchPool:
+    """Processes to match a map's pairs in (``workers`` of them, e.g. a ProcessPoolExecutor's)."""
+
+    executor: Executor
+    workers: int
+
+
+FeaturePairs = list[tuple[Features, Features]]
+_POOL_MATCHERS: dict[str, Matcher] = {}  # per pool process: each matcher loaded once
+
+
+def _match_chunk(name: str, feats: FeaturePairs) -> list[np.ndarray]:
+    """A chunk of pairs matched in a pool process (each pair on one thread, as in the driver, so
+    the matches are the same)."""
+    if name not in _POOL_MATCHERS:
+        _POOL_MATCHERS[name] = build_matcher(name)
+    return match_pairs(_POOL_MATCHERS[name], feats)
+
+
 def _match(
     gallery: Gallery,
     conf: MethodConf,
@@ -310,17 +340,34 @@ def _match(
     pairs: list[tuple[str, str]],
     path: Path,
     progress: Progress | None,
+    pool: MatchPool | None = None,
 ) -> dict[tuple[str, str], np.ndarray]:
     """Matches of each pair that agree with the known poses, cached in ``path`` a chunk of
-    ``MATCH_CHUNK`` pairs at a time (a batched matcher gets a chunk at once)."""
-    matcher = None
+    ``MATCH_CHUNK`` pairs at a time (a batched matcher gets a chunk at once). With ``pool`` the
+    chunks are matched in its processes, two a worker ahead of the one being written."""
     with _writable_cache(path) as f, features.reading() as read:
         todo = [(a, b) for a, b in pairs if _pair_key(a, b) not in f]
-        for start in range(0, len(todo), MATCH_CHUNK):
-            chunk = todo[start : start + MATCH_CHUNK]
-            matcher = matcher or build_matcher(conf.matcher)
-            feats = [(read(a), read(b)) for a, b in chunk]
-            for (a, b), (fa, fb), m in zip(chunk, feats, match_pairs(matcher, feats), strict=True):
+        chunks = [todo[start : start + MATCH_CHUNK] for start in range(0, len(todo), MATCH_CHUNK)]
+        matcher = build_matcher(conf.matcher) if todo and not pool else None
+        ahead: deque[tuple[FeaturePairs, Future[list[np.ndarray]]]] = deque()
+
+        def submit(k: int) -> None:
+            if pool is not None and k < len(chunks):
+                feats = [(read(a), read(b)) for a, b in chunks[k]]
+                ahead.append((feats, pool.executor.submit(_match_chunk, conf.matcher, feats)))
+
+        depth = 2 * pool.workers if pool else 0  # chunks in flight: every worker kept busy
+        for k in range(depth):
+            submit(k)
+        for k, chunk in enumerate(chunks):
+            if matcher is not None:
+                feats = [(read(a), read(b)) for a, b in chunk]
+                found = match_pairs(matcher, feats)
+            else:
+                feats, future = ahead.popleft()
+                found = future.result()
+                submit(k + depth)
+            for (a, b), (fa, fb), m in zip(chunk, feats, found, strict=True):
                 if len(m):
                     ia, ib = (
                         gallery.images[gallery.index_of(a)],
@@ -335,7 +382,8 @@ def _match(
                     m = m[verified(mapping, F, fa.keypoints[m[:, 0]], fb.keypoints[m[:, 1]])]
                 f[_pair_key(a, b)] = m.astype(np.uint32).reshape(-1, 2)
             if progress:
-                progress("matches", len(pairs) - len(todo) + start + len(chunk), len(pairs))
+                done = len(pairs) - len(todo) + k * MATCH_CHUNK + len(chunk)
+                progress("matches", done, len(pairs))
         return {(a, b): f[_pair_key(a, b)][()] for a, b in pairs}
 
 
@@ -499,15 +547,19 @@ def build_map(
     mapping: MappingConfig | None = None,
     overwrite: bool = False,
     progress: Progress | None = None,
+    pool: MatchPool | None = None,
 ) -> MapReport:
     """Build (or finish building) the map of ``gallery`` with method ``conf`` in ``out_dir``; a
-    finished one is returned as it is (its report is the build's)."""
+    finished one is returned as it is (its report is the build's). ``pool``: processes that match
+    the pairs where :func:`pools_matching` (the matcher's time spread over cores; the same
+    matches)."""
     mapping = mapping or MappingConfig()
+    pool = pool if pool and pools_matching(conf) else None
     out = Path(out_dir)
     identity = _identity(gallery, conf, mapping)
     with building(out, "a map"):
         finished = None if overwrite else _finished_map(out, identity)
-        return finished or _build(gallery, conf, out, mapping, identity, overwrite, progress)
+        return finished or _build(gallery, conf, out, mapping, identity, overwrite, progress, pool)
 
 
 def _build(
@@ -518,6 +570,7 @@ def _build(
     identity: dict[str, Any],
     overwrite: bool,
     progress: Progress | None,
+    pool: MatchPool | None,
 ) -> MapReport:
     quiet_pycolmap()
     seconds = {}
@@ -533,7 +586,7 @@ def _build(
     (out / "pairs.txt").write_text("".join(f"{a} {b}\n" for a, b in pairs))
     if overwrite:
         (out / "matches.h5").unlink(missing_ok=True)
-    matches = _match(gallery, conf, mapping, features, pairs, out / "matches.h5", progress)
+    matches = _match(gallery, conf, mapping, features, pairs, out / "matches.h5", progress, pool)
     seconds["matching"] = time.perf_counter() - t
     t = time.perf_counter()
     rec = _triangulate(gallery, mapping, features, matches, out)

@@ -132,6 +132,15 @@ def build_matcher(name: str) -> Matcher:
     return _build("matcher", name, MATCHERS, Matcher)
 
 
+def matcher_class(name: str) -> type:
+    """The class :func:`build_matcher` makes ``name`` of, without making one."""
+    if name not in MATCHERS and "." not in name and ":" not in name:
+        raise UnknownNameError(
+            "matcher", name, [*MATCHERS, "or a dotted path package.module:Class"]
+        )
+    return _load(MATCHERS[name][0] if name in MATCHERS else name, "matcher")
+
+
 def build_retrieval(name: str) -> GlobalDescriptor | None:
     """The global descriptor ``name``; ``None`` for pose-prior retrieval."""
     if name == POSE_PRIOR:

@@ -1,0 +1,73 @@
+"""A learned map's build in one process against its pairs matched on a pool of worker processes.
+
+    python benchmarks/bench_map_build.py [--town town10] [--method xfeat-lighterglue]
+                                         [--images 60] [--num-pairs 5] [--workers 1,2]
+                                         [--repeats 3]
+
+Takes the first ``--images`` images of the town's gallery (out/cache, as an experiment captures
+them), then builds the method's map from scratch, a warm-up first, ``--repeats`` times for each
+count of ``--workers`` (1: in this process, as before; more: a ``MatchPool`` of that many spawned
+processes, started before the timing, as ``vlocbench run`` starts its pool), and prints the
+median seconds of the whole build and of its matching stage, and whether the maps' points agree.
+"""
+
+from __future__ import annotations
+
+import argparse
+import concurrent.futures as cf
+import multiprocessing
+import statistics
+import tempfile
+from pathlib import Path
+
+from vlocbench.bench.experiment import load_experiment
+from vlocbench.bench.preparation import prepare_gallery
+from vlocbench.loc.gallery import GalleryWriter
+from vlocbench.loc.mapping import MappingConfig, MatchPool, build_map
+from vlocbench.loc.registry import method_conf
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--town", default="town10")
+    ap.add_argument("--method", default="xfeat-lighterglue")
+    ap.add_argument("--images", type=int, default=60)
+    ap.add_argument("--num-pairs", type=int, default=5)
+    ap.add_argument("--workers", default="1,2")
+    ap.add_argument("--repeats", type=int, default=3)
+    args = ap.parse_args()
+
+    plan = load_experiment({"name": "bench", "towns": [args.town], "methods": ["sift"]})
+    gallery = prepare_gallery(plan, args.town, progress=True)
+    root = Path(tempfile.mkdtemp(prefix="bench_map_build_"))
+    writer = GalleryWriter(root / "gallery")
+    for name in gallery.names[: args.images]:
+        im = gallery.images[gallery.index_of(name)]
+        writer.add(
+            name, gallery.load_image(name), im.camera, gallery.cameras[im.camera], im.world_from_cam
+        )
+    small = writer.close()
+    conf, mapping = method_conf(args.method), MappingConfig(num_pairs=args.num_pairs)
+    print(f"{args.town}, {args.method}: {len(small)} images, {args.num_pairs} pairs an image")
+    print("workers | build s (median) | matching s (median) | pairs | points")
+    for workers in (int(w) for w in args.workers.split(",")):
+        executor = None
+        if workers > 1:
+            spawn = multiprocessing.get_context("spawn")
+            executor = cf.ProcessPoolExecutor(workers, mp_context=spawn)
+        pool = MatchPool(executor, workers) if executor else None
+        try:
+            builds = [
+                build_map(small, conf, root / f"map{workers}", mapping, overwrite=True, pool=pool)
+                for _ in range(args.repeats + 1)  # the first warms up (the pool's imports too)
+            ][1:]
+        finally:
+            if executor:
+                executor.shutdown()
+        total = statistics.median(sum(b.seconds.values()) for b in builds)
+        matching = statistics.median(b.seconds["matching"] for b in builds)
+        print(f"{workers} | {total:.1f} | {matching:.1f} | {builds[0].pairs} | {builds[0].points}")
+
+
+if __name__ == "__main__":
+    main()
