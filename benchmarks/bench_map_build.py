@@ -22,7 +22,6 @@ from pathlib import Path
 
 from vlocbench.bench.experiment import load_experiment
 from vlocbench.bench.preparation import prepare_gallery
-from vlocbench.loc.gallery import GalleryWriter
 from vlocbench.loc.mapping import MappingConfig, MatchPool, build_map
 from vlocbench.loc.registry import method_conf
 
@@ -40,13 +39,7 @@ def main() -> None:
     plan = load_experiment({"name": "bench", "towns": [args.town], "methods": ["sift"]})
     gallery = prepare_gallery(plan, args.town, progress=True)
     root = Path(tempfile.mkdtemp(prefix="bench_map_build_"))
-    writer = GalleryWriter(root / "gallery")
-    for name in gallery.names[: args.images]:
-        im = gallery.images[gallery.index_of(name)]
-        writer.add(
-            name, gallery.load_image(name), im.camera, gallery.cameras[im.camera], im.world_from_cam
-        )
-    small = writer.close()
+    small = gallery.head(args.images, root / "gallery")
     conf, mapping = method_conf(args.method), MappingConfig(num_pairs=args.num_pairs)
     print(f"{args.town}, {args.method}: {len(small)} images, {args.num_pairs} pairs an image")
     print("workers | build s (median) | matching s (median) | pairs | points")

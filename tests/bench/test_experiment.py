@@ -197,7 +197,10 @@ def test_bad_experiments_are_clear_errors(tmp_path):
         _spec(methods=["surf"])
     with pytest.raises(UnknownNameError, match=r"sweep key 'illumnation\.k'; valid: camera"):
         _spec(sweep={"illumnation.k": [1]})
-    with pytest.raises(UnknownNameError, match="valid: k, sun_azimuth_deg"):
+    with pytest.raises(
+        UnknownNameError,
+        match="illumination: unknown key 'kk'; valid: cloud_cover, k, sun_azimuth_deg",
+    ):
         _spec(sweep={"illumination.kk": [1]})
     with pytest.raises(
         ConfigError, match=r"sweep\.illumination\.k: an empty list expands to zero runs"

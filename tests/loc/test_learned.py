@@ -32,7 +32,6 @@ def test_aliked_lightglue_and_effnet_localize_offline(
     offline, gallery, small_town, stretch, tmp_path_factory
 ):
     from vlocbench.bench.visual import camera_model
-    from vlocbench.loc.gallery import GalleryWriter
     from vlocbench.loc.localizer import MapLocalizer
     from vlocbench.loc.mapping import MappingConfig, build_map
     from vlocbench.loc.registry import method_conf
@@ -40,13 +39,7 @@ def test_aliked_lightglue_and_effnet_localize_offline(
 
     # the first 32 m only (learned methods are slow on a CPU)
     root = tmp_path_factory.mktemp("learned")
-    writer = GalleryWriter(root / "gallery")
-    for name in gallery.names[:16]:
-        im = gallery.images[gallery.index_of(name)]
-        writer.add(
-            name, gallery.load_image(name), im.camera, gallery.cameras[im.camera], im.world_from_cam
-        )
-    small = writer.close()
+    small = gallery.head(16, root / "gallery")
     out = root / "aliked"
     report = build_map(small, method_conf("aliked-lightglue"), out, MappingConfig(num_pairs=3))
     assert report.points > 300
@@ -207,17 +200,11 @@ def test_a_learned_maps_pairs_matched_in_a_pool_are_the_drivers_matches(
     import h5py
 
     from vlocbench.loc import mapping
-    from vlocbench.loc.gallery import GalleryWriter
     from vlocbench.loc.registry import method_conf
 
     tmp_path = tmp_path_factory.mktemp("pooled")  # the offline check owns tmp_path
-    writer = GalleryWriter(tmp_path / "gallery")
-    for name in gallery.names[:10]:
-        im = gallery.images[gallery.index_of(name)]
-        writer.add(
-            name, gallery.load_image(name), im.camera, gallery.cameras[im.camera], im.world_from_cam
-        )
-    small = writer.close()
+    small = gallery.head(10, tmp_path / "gallery")
+    assert small.names == gallery.names[:10] and small.identity != gallery.identity
     conf, pairs = method_conf("xfeat-lighterglue"), mapping.MappingConfig(num_pairs=3)
     assert mapping.pools_matching(conf) and not mapping.pools_matching(method_conf("sift"))
     monkeypatch.setattr(mapping, "MATCH_CHUNK", 4)  # several chunks in flight at once

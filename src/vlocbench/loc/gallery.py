@@ -93,6 +93,15 @@ class Gallery:
             raise LocalizationError(f"gallery image {path} is missing or unreadable")
         return check_image(bgr[:, :, ::-1], f"gallery image {path}")
 
+    def head(self, count: int, root: str | Path) -> Gallery:
+        """Its first ``count`` images as a gallery of their own in ``root`` (the files copied as
+        they are): a stretch of a route, for a quick map."""
+        writer = GalleryWriter(root)
+        for im in self.images[:count]:
+            source = self.root / IMAGE_DIR / im.name
+            writer.add_file(im.name, source, im.camera, self.cameras[im.camera], im.world_from_cam)
+        return writer.close()
+
     @property
     def identity(self) -> str:
         """What keys maps built from this gallery: its folder name and the content of its index."""
