@@ -7,7 +7,7 @@ from tests.conftest import call_behind_build_lock
 from tests.loc.plugins import CountingSift
 from vlocbench.errors import ConfigError, LocalizationError, UnknownNameError
 from vlocbench.loc.gallery import Gallery
-from vlocbench.loc.mapping import build_map, sampson_px
+from vlocbench.loc.mapping import build_map, pools_matching, sampson_px
 from vlocbench.loc.registry import MethodConf, build_features, method_conf
 
 
@@ -35,6 +35,12 @@ def test_unknown_and_broken_methods():
         build_features("tests.loc.plugins:Missing")
     with pytest.raises(ConfigError, match="does not implement FeatureExtractor"):
         build_features("tests.loc.plugins:NotAnExtractor")
+    with pytest.raises(
+        UnknownNameError, match=r"unknown matcher 'superglue'; valid: .*dotted path"
+    ):
+        pools_matching(MethodConf("sift", "superglue"))
+    with pytest.raises(ConfigError, match="cannot load"):
+        pools_matching(MethodConf("sift", "tests.loc.plugins:Missing"))
 
 
 def test_gallery_format_and_bad_galleries(gallery, tmp_path):

@@ -89,7 +89,8 @@ def prepare_maps(
             if len(todo) == 1 and pools_matching(todo[0][2].conf):  # its pairs on every worker
                 with _pool(workers) as pool:
                     _map(*todo[0], bars, MatchPool(pool, workers))
-            _in_parallel(_map_job, todo, workers, bars, "maps")
+            else:
+                _in_parallel(_map_job, todo, workers, bars, "maps")
         return {key: str(_map(*job, bars)) for key, job in jobs.items()}
     finally:
         bars.close()

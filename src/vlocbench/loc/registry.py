@@ -109,16 +109,20 @@ def _load(target: str, kind: str) -> type:
         raise ConfigError(kind, f"cannot load {target!r}: {exc}") from None
 
 
+def _class(kind: str, name: str, presets: dict[str, tuple[str, dict[str, Any]]]) -> type:
+    """The class a preset ``name`` or a dotted path names."""
+    if name in presets:
+        return _load(presets[name][0], kind)
+    if "." in name or ":" in name:
+        return _load(name, kind)
+    raise UnknownNameError(kind, name, [*presets, "or a dotted path package.module:Class"])
+
+
 def _build(
     kind: str, name: str, presets: dict[str, tuple[str, dict[str, Any]]], protocol: type
 ) -> Any:
-    if name in presets:
-        target, kwargs = presets[name]
-        obj = _load(target, kind)(name=name, **kwargs)
-    elif "." in name or ":" in name:
-        obj = _load(name, kind)()
-    else:
-        raise UnknownNameError(kind, name, [*presets, "or a dotted path package.module:Class"])
+    cls = _class(kind, name, presets)
+    obj = cls(name=name, **presets[name][1]) if name in presets else cls()
     if not isinstance(obj, protocol):
         raise ConfigError(kind, f"{name!r} does not implement {protocol.__name__}")
     return obj
@@ -134,11 +138,7 @@ def build_matcher(name: str) -> Matcher:
 
 def matcher_class(name: str) -> type:
     """The class :func:`build_matcher` makes ``name`` of, without making one."""
-    if name not in MATCHERS and "." not in name and ":" not in name:
-        raise UnknownNameError(
-            "matcher", name, [*MATCHERS, "or a dotted path package.module:Class"]
-        )
-    return _load(MATCHERS[name][0] if name in MATCHERS else name, "matcher")
+    return _class("matcher", name, MATCHERS)
 
 
 def build_retrieval(name: str) -> GlobalDescriptor | None:
