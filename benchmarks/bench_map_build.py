@@ -7,19 +7,20 @@
 Takes the first ``--images`` images of the town's gallery (out/cache, as an experiment captures
 them), then builds the method's map from scratch, a warm-up first, ``--repeats`` times for each
 count of ``--workers`` (1: in this process, as before; more: a ``MatchPool`` of that many spawned
-processes, started before the timing, as ``vlocbench run`` starts its pool), and prints the
+processes, one thread each, started before the timing, as ``vlocbench run`` and
+``vlocbench build-map --workers`` start theirs), and prints the
 median seconds of the whole build and of its matching stage, and whether the maps' points agree.
 """
 
 from __future__ import annotations
 
 import argparse
-import concurrent.futures as cf
-import multiprocessing
+import contextlib
 import statistics
 import tempfile
 from pathlib import Path
 
+from vlocbench.bench.executors import worker_pool
 from vlocbench.bench.experiment import load_experiment
 from vlocbench.bench.preparation import prepare_gallery
 from vlocbench.loc.mapping import MappingConfig, MatchPool, build_map
@@ -44,19 +45,13 @@ def main() -> None:
     print(f"{args.town}, {args.method}: {len(small)} images, {args.num_pairs} pairs an image")
     print("workers | build s (median) | matching s (median) | pairs | points")
     for workers in (int(w) for w in args.workers.split(",")):
-        executor = None
-        if workers > 1:
-            spawn = multiprocessing.get_context("spawn")
-            executor = cf.ProcessPoolExecutor(workers, mp_context=spawn)
-        pool = MatchPool(executor, workers) if executor else None
-        try:
+        with contextlib.ExitStack() as stack:
+            executor = stack.enter_context(worker_pool(workers)) if workers > 1 else None
+            pool = MatchPool(executor, workers) if executor else None
             builds = [
                 build_map(small, conf, root / f"map{workers}", mapping, overwrite=True, pool=pool)
                 for _ in range(args.repeats + 1)  # the first warms up (the pool's imports too)
             ][1:]
-        finally:
-            if executor:
-                executor.shutdown()
         total = statistics.median(sum(b.seconds.values()) for b in builds)
         matching = statistics.median(b.seconds["matching"] for b in builds)
         print(f"{workers} | {total:.1f} | {matching:.1f} | {builds[0].pairs} | {builds[0].points}")

@@ -412,8 +412,15 @@ def _gallery_export(args: argparse.Namespace) -> int:
 
 
 def _build_map(args: argparse.Namespace) -> int:
+    from vlocbench.bench.executors import worker_pool
     from vlocbench.loc.gallery import Gallery
-    from vlocbench.loc.mapping import MappingConfig, build_map, default_map_dir
+    from vlocbench.loc.mapping import (
+        MappingConfig,
+        MatchPool,
+        build_map,
+        default_map_dir,
+        pools_matching,
+    )
     from vlocbench.loc.registry import method_conf
 
     gallery = Gallery.load(args.gallery)
@@ -430,7 +437,12 @@ def _build_map(args: argparse.Namespace) -> int:
         if done == total or done % 50 == 0:
             print(f"  {stage}: {done}/{total}", flush=True)
 
-    report = build_map(gallery, conf, out, mapping, overwrite=args.overwrite, progress=progress)
+    if args.workers > 1 and pools_matching(conf):
+        with worker_pool(args.workers) as pool:
+            match_pool = MatchPool(pool, args.workers)
+            report = build_map(gallery, conf, out, mapping, args.overwrite, progress, match_pool)
+    else:  # SIFT's nearest neighbours: fast, on every core through BLAS already
+        report = build_map(gallery, conf, out, mapping, overwrite=args.overwrite, progress=progress)
     times = ", ".join(f"{k} {v:.0f} s" for k, v in report.seconds.items())
     print(
         f"map {out}: {report.images} images, {report.pairs} pairs, {report.points} points, "
@@ -650,6 +662,12 @@ def _add_map_verbs(sub: Any, shared: dict[str, argparse.ArgumentParser]) -> None
         type=_count,
         default=2,
         help="drop points seen in fewer images (2, the paper's: keep every point)",
+    )
+    p.add_argument(
+        "--workers",
+        type=_count,
+        default=1,
+        help="processes that match a network matcher's pairs (the same matches as one)",
     )
     p.add_argument("--overwrite", action="store_true", help="recompute cached stages")
     p.set_defaults(func=_build_map)

@@ -192,13 +192,12 @@ def test_the_device_is_auto_cpu_or_cuda(monkeypatch):
 def test_a_learned_maps_pairs_matched_in_a_pool_are_the_drivers_matches(
     offline, gallery, tmp_path_factory, monkeypatch
 ):
-    """A single map build spreads its LighterGlue pairs over pool processes: chunk by chunk, each
-    pair on one thread, so the matches (and the map) are those of the build in one process."""
-    import concurrent.futures as cf
-    import multiprocessing
-
+    """A single map build spreads its LighterGlue pairs over pool processes (``vlocbench build-map
+    --workers 2`` here, a run's workers in ``prepare_maps``): chunk by chunk, each pair on one
+    thread, so the matches (and the map) are those of the build in one process."""
     import h5py
 
+    from vlocbench.cli import main
     from vlocbench.loc import mapping
     from vlocbench.loc.registry import method_conf
 
@@ -209,12 +208,13 @@ def test_a_learned_maps_pairs_matched_in_a_pool_are_the_drivers_matches(
     assert mapping.pools_matching(conf) and not mapping.pools_matching(method_conf("sift"))
     monkeypatch.setattr(mapping, "MATCH_CHUNK", 4)  # several chunks in flight at once
     alone = mapping.build_map(small, conf, tmp_path / "alone", pairs)
-    spawn = multiprocessing.get_context("spawn")
-    with cf.ProcessPoolExecutor(2, mp_context=spawn) as executor:
-        pooled = mapping.build_map(
-            small, conf, tmp_path / "pooled", pairs, pool=mapping.MatchPool(executor, 2)
-        )
-    assert pooled.points == alone.points > 100 and pooled.pairs == alone.pairs
+    pools, real_pool = [], mapping.MatchPool
+    monkeypatch.setattr(mapping, "MatchPool", lambda ex, n: pools.append(n) or real_pool(ex, n))
+    pooled = [str(small.root), "--method", "xfeat-lighterglue", "--num-pairs", "3"]
+    assert main(["build-map", *pooled, "--workers", "2", "--out", str(tmp_path / "pooled")]) == 0
+    assert pools == [2]
+    report = mapping.build_map(small, conf, tmp_path / "pooled", pairs)  # finished: its report
+    assert report.points == alone.points > 100 and report.pairs == alone.pairs
     with (
         h5py.File(tmp_path / "alone" / "matches.h5") as a,
         h5py.File(tmp_path / "pooled" / "matches.h5") as b,

@@ -15,7 +15,8 @@ import os
 import time
 import traceback
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any
 
@@ -172,6 +173,20 @@ def local_pool(workers: int) -> cf.ProcessPoolExecutor:
         initializer=worker_init,
         initargs=(os.getpid(),),
     )
+
+
+@contextmanager
+def worker_pool(workers: int) -> Iterator[cf.ProcessPoolExecutor]:
+    """``workers`` pool processes (one thread each) for the ``with`` block; a failure or an
+    interruption in it kills them rather than waiting for their jobs."""
+    pool = local_pool(workers)
+    try:
+        yield pool
+    except BaseException:
+        kill_workers(pool)
+        raise
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
 
 
 def _run_on_pool(

@@ -7,12 +7,11 @@ from __future__ import annotations
 import concurrent.futures as cf
 import logging
 import time
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from vlocbench.bench.executors import kill_workers, local_pool
+from vlocbench.bench.executors import worker_pool
 from vlocbench.bench.experiment import ExperimentPlan
 from vlocbench.bench.gallery_capture import capture_gallery
 from vlocbench.bench.methods import MethodSpec
@@ -87,7 +86,7 @@ def prepare_maps(
                 {j[-1]: j for j in jobs.values() if not (j[-1] / MAP_FILE).exists()}.values()
             )
             if len(todo) == 1 and pools_matching(todo[0][2].conf):  # its pairs on every worker
-                with _pool(workers) as pool:
+                with worker_pool(workers) as pool:
                     _map(*todo[0], bars, MatchPool(pool, workers))
             else:
                 _in_parallel(_map_job, todo, workers, bars, "maps")
@@ -118,24 +117,11 @@ def _in_parallel(
     if len(args) < 2:
         return  # one job runs in the driver, with every thread
     logger.info(f"{len(args)} {stage} to make, {min(workers, len(args))} at a time")
-    with _pool(min(workers, len(args))) as pool:
+    with worker_pool(min(workers, len(args))) as pool:
         futures = [pool.submit(job, *a) for a in args]
         for n, future in enumerate(cf.as_completed(futures), 1):
             future.result()
             bars(stage, n, len(args))
-
-
-@contextmanager
-def _pool(workers: int) -> Iterator[cf.ProcessPoolExecutor]:
-    """``workers`` pool processes (one thread each); a failure or an interruption kills them."""
-    pool = local_pool(workers)
-    try:
-        yield pool
-    except BaseException:
-        kill_workers(pool)
-        raise
-    finally:
-        pool.shutdown(wait=True, cancel_futures=True)
 
 
 def _gallery_job(plan: ExperimentPlan, town_name: str, cache: Path) -> None:
