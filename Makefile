@@ -3,7 +3,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 JOBS ?= 2
 
-.PHONY: demo test lint format bench setup docs
+.PHONY: demo test lint format bench setup docs reproduce
 
 demo:
 	@scripts/setup.sh
@@ -25,6 +25,14 @@ format:
 	@scripts/setup.sh test
 	$(VENV)/bin/ruff format src tests benchmarks
 	$(VENV)/bin/ruff check --fix src tests benchmarks
+
+# The paper's three experiments at its scale, each in its resumable store (out/paper/...), then
+# each report. Many hours: see docs/reproduction.md; `make reproduce JOBS=16` on a larger machine.
+reproduce:
+	@scripts/setup.sh
+	for e in illumination viewpoint weather; do \
+		$(VENV)/bin/vlocbench run experiments/paper/$$e.yaml --workers $(JOBS) || exit $$?; \
+	done
 
 bench:
 	@scripts/setup.sh
