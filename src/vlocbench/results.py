@@ -62,7 +62,8 @@ def trajectory(output_dir: str | Path, key: str) -> pd.DataFrame:
 def localizations(output_dir: str | Path, key: str) -> pd.DataFrame:
     """Episode ``key``'s localizations, a row per query: its time, success, the estimate, its
     errors (position, 3D position, rotation, yaw) and the method's report (inliers, compute
-    time, ...); no rows for an odometry-only drive."""
+    time, its time by stage as a dict in ``stage_s``, ...); no rows for an odometry-only
+    drive."""
     return pd.DataFrame(read_episode_table(output_dir, key, "localizations"))
 
 

@@ -88,6 +88,7 @@ def synthetic_result(failures: int, queries: int = 4, lock_losses: int = 0) -> E
             latency_s=0.2,
             fused=True,
             reason="",
+            stage_s={"features": 0.03, "pnp": 0.02} if k % 2 == 0 else {},
         )
         for k in range(queries)
     )

@@ -55,6 +55,8 @@ def test_write_read_and_resume_keys(tmp_path):
         assert traj["true_x_m"].shape == (50,) and traj["ekf_x_m"][0] == pytest.approx(0.1)
         locs = store.read_table("a", "localizations")
         assert list(locs["success"]) == [True] * 4
+        # the localizer's time by stage, a dict a query (empty where it reported none)
+        assert list(locs["stage_s"]) == [{"features": 0.03, "pnp": 0.02}, {}] * 2
     # a second run of the same experiment: new run, old episodes found by key
     with ResultStore(tmp_path, "exp") as store:
         store.start_run("run2", {"name": "exp"}, ["a", "d"])

@@ -1,4 +1,5 @@
 import numpy as np
+import pytest
 
 from tests.conftest import CAMERA
 from vlocbench.bench import EpisodeConfig, run_episode
@@ -18,6 +19,16 @@ def test_visual_localizer_in_a_ground_truth_episode(small_town, stretch, sift_ma
     assert np.median(pos) < 0.1
     assert np.mean(pos < 0.5) > 0.8
     assert all(x.compute_time_s > 0 for x in recs)
+    # its time by stage, together within the time it took, and the report's mean per stage
+    from vlocbench.bench.metrics import MAP_STAGES, episode_metrics
+
+    assert all(set(x.stage_s) == set(MAP_STAGES) for x in recs if x.success)
+    assert all(0 < sum(x.stage_s.values()) <= x.compute_time_s for x in recs)
+    extra = episode_metrics(r).extra
+    assert extra["ct_matching_ms"] == pytest.approx(
+        1000 * np.mean([x.stage_s.get("matching", 0.0) for x in recs])
+    )
+    assert 0 < extra["ct_features_ms"] <= 1000 * np.mean([x.compute_time_s for x in recs])
     # each answer keeps its PnP inlier count (what localizer.min_inliers would compare), a failure 0
     assert all(x.inliers >= 4 if x.success else x.inliers == 0 for x in recs)
     # the vehicle pose comes through the camera's mounting: the yaw is the car's, not the camera's

@@ -223,6 +223,7 @@ def _record(p: _InFlight, fused: bool | None) -> LocalizationRecord:
         retrieved_images=tuple(str(n) for n in e.retrieved),
         covariance=() if e.covariance is None else tuple(np.asarray(e.covariance, float).ravel()),
         inliers=int(e.inliers) if e.success else 0,
+        stage_s={str(k): float(v) for k, v in e.stage_s.items()},
     )
 
 

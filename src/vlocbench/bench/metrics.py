@@ -440,6 +440,30 @@ for _name, _figure, _header, _digits in (
             digits=_digits,
         )
     )
+# the stages of the map localizer's queries (``QueryResult.seconds``); another localizer's own
+# stages are stored with its localizations and take a declaration of their own to be reported
+MAP_STAGES = ("features", "retrieval", "matching", "pnp")
+
+
+def _stage_ms(result: EpisodeResult, stage: str) -> float:
+    """Mean time of ``stage`` per query that reported stages (a query that failed before the stage
+    spent 0 on it), ms; NaN when no query reported it."""
+    timed = [x.stage_s for x in result.localizations if x.stage_s]
+    if not any(stage in t for t in timed):
+        return float("nan")
+    return 1000.0 * float(np.mean([t.get(stage, 0.0) for t in timed]))
+
+
+for _stage in MAP_STAGES:
+    declare_metric(
+        Metric(
+            name=f"ct_{_stage}_ms",
+            episode=partial(_stage_ms, stage=_stage),
+            header=f"CT: {_stage} (ms a query)",
+            kinds=("recall", "failure"),
+            digits=0,
+        )
+    )
 declare_metric(
     Metric(
         name="answer_inside_95_share",

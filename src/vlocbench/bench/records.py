@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 from typing import Any, Literal, get_args
 
 import numpy as np
@@ -69,6 +69,9 @@ class LocalizationRecord:
     # PnP inliers of the answer (0 on failure, or when the localizer reports none): what a
     # ``localizer.min_inliers`` would have been compared with
     inliers: int = 0
+    # the localizer's time by stage (s), as it reports it: a map localizer's features, retrieval,
+    # matching and pnp (together its compute_time_s); empty for localizers that report none
+    stage_s: dict[str, float] = field(default_factory=dict)
 
 
 def localization_columns(locs: Sequence[LocalizationRecord]) -> dict[str, list[Any]]:

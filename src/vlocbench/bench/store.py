@@ -201,9 +201,15 @@ def read_episodes(output_dir: str | Path) -> list[EpisodeRow]:
 
 
 def _columns(result: EpisodeResult) -> tuple[dict[str, Any], dict[str, Any]]:
+    import pyarrow as pa
+
     tr = result.trajectory
     trajectory = {f.name: getattr(tr, f.name) for f in dataclasses.fields(tr)}
-    return trajectory, localization_columns(result.localizations)
+    localizations = localization_columns(result.localizations)
+    if "stage_s" in localizations:  # a map column: parquet cannot hold a struct without fields
+        stages = [list(d.items()) for d in localizations["stage_s"]]
+        localizations["stage_s"] = pa.array(stages, pa.map_(pa.string(), pa.float64()))
+    return trajectory, localizations
 
 
 def _make_strict(db: sqlite3.Connection) -> None:
@@ -401,5 +407,13 @@ def read_episode_table(output_dir: str | Path, key: str, name: str) -> dict[str,
     path = Path(output_dir) / EPISODES_DIR / key / f"{name}.parquet"
     if not path.is_file():
         raise StoreError(f"{output_dir} has no {name} table for episode {key}")
+    import pyarrow as pa
+
     table = pq.read_table(path)
-    return {c: table.column(c).to_numpy(zero_copy_only=False) for c in table.column_names}
+    columns = {}
+    for name, column in zip(table.column_names, table.columns, strict=True):
+        if pa.types.is_map(column.type):  # e.g. stage_s: a dict a row
+            columns[name] = np.array([dict(row) for row in column.to_pylist()], dtype=object)
+        else:
+            columns[name] = column.to_numpy(zero_copy_only=False)
+    return columns
