@@ -46,10 +46,11 @@ class Scribbling(VisualLocalizer):
 
 
 def _comparable(result):
-    """An episode's result without its wall and compute times."""
+    """An episode's result without its wall and compute times (the stages' names kept)."""
     d = to_dict(dataclasses.replace(result, wall_time_s=0.0))
     for rec in d["localizations"]:
         rec["compute_time_s"] = 0.0
+        rec["stage_s"] = sorted(rec["stage_s"])
     return d
 
 
