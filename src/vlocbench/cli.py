@@ -412,7 +412,6 @@ def _gallery_export(args: argparse.Namespace) -> int:
 
 
 def _build_map(args: argparse.Namespace) -> int:
-    from vlocbench.bench.executors import worker_pool
     from vlocbench.loc.gallery import Gallery
     from vlocbench.loc.mapping import (
         MappingConfig,
@@ -438,6 +437,8 @@ def _build_map(args: argparse.Namespace) -> int:
             print(f"  {stage}: {done}/{total}", flush=True)
 
     if args.workers > 1 and pools_matching(conf):
+        from vlocbench.bench.executors import worker_pool  # the simulator's and a run's imports
+
         with worker_pool(args.workers) as pool:
             match_pool = MatchPool(pool, args.workers)
             report = build_map(gallery, conf, out, mapping, args.overwrite, progress, match_pool)
