@@ -9,7 +9,8 @@ them), then builds the method's map from scratch, a warm-up first, ``--repeats``
 count of ``--workers`` (1: in this process, as before; more: a ``MatchPool`` of that many spawned
 processes, one thread each, started before the timing, as ``vlocbench run`` and
 ``vlocbench build-map --workers`` start theirs), and prints the
-median seconds of the whole build and of its matching stage, and whether the maps' points agree.
+median seconds of the whole build and of its matching stage, with each build's pairs and points
+(the same for every count when the matches are).
 """
 
 from __future__ import annotations

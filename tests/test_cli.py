@@ -200,6 +200,10 @@ def test_cli_run_and_report_errors(tiny, tmp_path, capsys):
         main(["run", str(other), "--workers", "0"])
     assert exc.value.code == 2
     assert "--workers: must be at least 1, got 0" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exc:
+        main(["build-map", str(tmp_path / "gallery"), "--workers", "0"])
+    assert exc.value.code == 2
+    assert "--workers: must be at least 1, got 0" in capsys.readouterr().err
     assert main(["report", str(tmp_path / "empty")]) == 1
     assert "holds no vlocbench results" in capsys.readouterr().err
     assert main(["report", str(root / "out"), "--no-examples"]) == 0

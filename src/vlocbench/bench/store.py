@@ -402,18 +402,18 @@ class ResultStore:
 def read_episode_table(output_dir: str | Path, key: str, name: str) -> dict[str, np.ndarray]:
     """One stored episode's ``trajectory`` or ``localizations`` table as numpy columns, without
     the lock (a committed episode's tables never change)."""
+    import pyarrow as pa
     import pyarrow.parquet as pq
 
     path = Path(output_dir) / EPISODES_DIR / key / f"{name}.parquet"
     if not path.is_file():
         raise StoreError(f"{output_dir} has no {name} table for episode {key}")
-    import pyarrow as pa
-
     table = pq.read_table(path)
     columns = {}
-    for name, column in zip(table.column_names, table.columns, strict=True):
+    for column_name, column in zip(table.column_names, table.columns, strict=True):
         if pa.types.is_map(column.type):  # e.g. stage_s: a dict a row
-            columns[name] = np.array([dict(row) for row in column.to_pylist()], dtype=object)
+            rows = [dict(row) for row in column.to_pylist()]
+            columns[column_name] = np.array(rows, dtype=object)
         else:
-            columns[name] = column.to_numpy(zero_copy_only=False)
+            columns[column_name] = column.to_numpy(zero_copy_only=False)
     return columns
