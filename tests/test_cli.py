@@ -164,6 +164,8 @@ def test_run_part_of_an_experiment_names_what_it_lacks(capsys, tmp_path):
     assert "unknown town 'town02'; valid: town01, town10" in capsys.readouterr().err
     assert main(["run", experiment, "--setup", "k=0", "--setup", "k=1", *out]) == 1
     assert "unknown setup 'k=1'; valid: illumination.k=0" in capsys.readouterr().err
+    assert main(["run", experiment, "--repetitions", "9", *out]) == 1
+    assert "repetitions: must be from 1 to the experiment's" in capsys.readouterr().err
     with pytest.raises(SystemExit, match="2"):  # a usage error, from argparse
         main(["run", experiment, "--methods", " , "])
     assert "expected comma-separated names, got none" in capsys.readouterr().err

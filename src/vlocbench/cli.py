@@ -201,7 +201,7 @@ def _run(args: argparse.Namespace) -> int:
     from vlocbench.bench.worker import default_workers
 
     plan = load_experiment(args.experiment).only(
-        args.towns or (), args.methods or (), args.kinds or (), args.setup or ()
+        args.towns or (), args.methods or (), args.kinds or (), args.setup or (), args.repetitions
     )
     if args.output:
         plan = plan.with_output(args.output)
@@ -227,7 +227,7 @@ def _run(args: argparse.Namespace) -> int:
     files = write_report(plan.output_dir, examples=not args.no_examples)
     print("\n".join(summary_lines(files.summary)))
     print(f"report: {files.html.resolve()}")
-    if args.towns or args.methods or args.kinds or args.setup:
+    if args.towns or args.methods or args.kinds or args.setup or args.repetitions:
         print(
             f"(of this part; of the whole experiment: vlocbench report {plan.output_dir} "
             f"--experiment {args.experiment})"
@@ -795,6 +795,12 @@ def _add_experiment_verbs(sub: Any, shared: dict[str, argparse.ArgumentParser]) 
         action="append",
         help="only this setup of its sweep, by its label (k=0 or illumination.k=0; a grouped "
         "level by its fields, 'dz_m=4, pitch_down_deg=22.5'; repeat the option for more)",
+    )
+    p.add_argument(
+        "--repetitions",
+        type=_count,
+        help="only the first N failure and odometry-only drives of each setup: a long sweep's "
+        "whole shape first, its spread later",
     )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--no-report", action="store_true", help="skip the report")

@@ -145,6 +145,24 @@ def test_part_of_a_plan_keeps_its_episode_keys():
         whole.only(setups=["k=3"])
 
 
+def test_the_first_repetitions_of_a_plan_keep_their_keys():
+    whole = _spec(repetitions=3, baseline_repetitions=10)
+    keys = {t.key: t for t in whole.tasks()}
+    first = whole.only(repetitions=2).tasks()
+    assert all(t.key in keys for t in first)
+    # each method's recall drive, its first 2 failure drives, the odometry line's first 2
+    assert sorted((t.kind, t.repetition) for t in first) == sorted(
+        (t.kind, t.repetition) for t in keys.values() if t.repetition < 2
+    )
+    assert sum(t.kind == "baseline" for t in first) == 2
+    # all of a method's repetitions: the odometry line cut to as many
+    assert whole.only(repetitions=3).tasks() == [
+        t for t in whole.tasks() if t.kind != "baseline" or t.repetition < 3
+    ]
+    with pytest.raises(ConfigError, match="repetitions: must be from 1 to the experiment's 3, got 4"):
+        whole.only(repetitions=4)
+
+
 def test_a_grouped_level_is_chosen_by_its_label_or_its_fields():
     whole = _spec(
         sweep={

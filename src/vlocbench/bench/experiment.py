@@ -271,12 +271,21 @@ class ExperimentPlan:
         methods: Sequence[str] = (),
         kinds: Sequence[str] = (),
         setups: Sequence[str] = (),
+        repetitions: int | None = None,
     ) -> ExperimentPlan:
         """The part of the plan in ``towns``, with ``methods``, of the episode ``kinds`` (recall,
         failure, baseline) and in the ``setups`` of its sweep (by label, ``illumination.k=0``, or
-        without the key's first part, ``k=0``); empty: all of them. Its episodes keep their keys,
-        so a later run of the whole plan reuses them."""
+        without the key's first part, ``k=0``); empty: all of them. ``repetitions``: only the
+        first so many failure and odometry-only drives of each setup (the whole shape of a long
+        sweep before its spread); None: all. Its episodes keep their keys, so a later run of the
+        whole plan reuses them."""
         s = self.spec
+        if repetitions is not None:
+            require(
+                1 <= repetitions <= s.repetitions,
+                "repetitions",
+                f"must be from 1 to the experiment's {s.repetitions}, got {repetitions}",
+            )
         planned = [k for k in EPISODE_KINDS if getattr(s, k)]
         labels = [x.label for x in self.setups]
         choices = {
@@ -296,6 +305,9 @@ class ExperimentPlan:
             recall=s.recall and (not kinds or "recall" in kinds),
             failure=s.failure and (not kinds or "failure" in kinds),
             baseline=s.baseline and (not kinds or "baseline" in kinds),
+            repetitions=repetitions or s.repetitions,
+            # the first drives of the odometry line: as many as of each method
+            baseline_repetitions=repetitions or s.baseline_repetitions,
         )
         chosen = tuple(
             x
