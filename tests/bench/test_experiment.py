@@ -159,7 +159,9 @@ def test_the_first_repetitions_of_a_plan_keep_their_keys():
     assert whole.only(repetitions=3).tasks() == [
         t for t in whole.tasks() if t.kind != "baseline" or t.repetition < 3
     ]
-    with pytest.raises(ConfigError, match="repetitions: must be from 1 to the experiment's 3, got 4"):
+    with pytest.raises(
+        ConfigError, match="repetitions: must be from 1 to the experiment's 3, got 4"
+    ):
         whole.only(repetitions=4)
 
 

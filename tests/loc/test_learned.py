@@ -82,7 +82,7 @@ def test_disk_features_and_lightglue_match_offline(offline, gallery):
 
 def test_xfeat_and_lighterglue_match_offline_and_agree_with_the_true_geometry(offline, gallery):
     from vlocbench.bench.visual import camera_model
-    from vlocbench.loc.mapping import _fundamental
+    from vlocbench.loc.mapping import fundamental_from_poses
 
     i, j = 10, 11
     fa, fb, matches = _match_two_gallery_images(gallery, "xfeat", "lighterglue-xfeat", i, j)
@@ -91,12 +91,25 @@ def test_xfeat_and_lighterglue_match_offline_and_agree_with_the_true_geometry(of
     # the fundamental matrix of the two known camera poses
     world_from_a, world_from_b = (gallery.images[k].world_from_cam for k in (i, j))
     cam = camera_model(CAMERA)
-    fundamental = _fundamental(cam, world_from_a, cam, world_from_b)
+    fundamental = fundamental_from_poses(cam, world_from_a, cam, world_from_b)
     xa = np.c_[fa.keypoints[matches[:, 0]], np.ones(len(matches))]
     xb = np.c_[fb.keypoints[matches[:, 1]], np.ones(len(matches))]
     lines = xa @ fundamental.T  # epipolar lines in b
     distance_px = np.abs(np.sum(lines * xb, axis=1)) / np.hypot(lines[:, 0], lines[:, 1])
     assert np.median(distance_px) < 1.5 and np.mean(distance_px < 3.0) > 0.8
+
+
+def test_xfeat_keypoint_budgets_are_presets(offline, gallery):
+    """``xfeat`` keeps the strongest 1024 keypoints, ``xfeat-4096`` (the paper's SuperPoint's
+    budget) the strongest 4096: the same detections, more of them."""
+    from vlocbench.loc.registry import build_features, method_conf
+
+    assert method_conf("xfeat-lighterglue-4096").features == "xfeat-4096"
+    small = gallery.load_image(gallery.names[10])
+    image = small.repeat(3, axis=0).repeat(3, axis=1)  # enlarged: more than 1024 detections
+    few, many = (build_features(name).extract(image) for name in ("xfeat", "xfeat-4096"))
+    assert len(few) == 1024 and 1024 < len(many) <= 4096
+    assert np.isin(few.keypoints.view("f4,f4"), many.keypoints.view("f4,f4")).all()
 
 
 def test_batched_lighterglue_gives_each_pair_its_own_matches(offline, gallery):

@@ -177,7 +177,7 @@ def _pair_key(a: str, b: str) -> str:
 
 
 # -- geometry ------------------------------------------------------------------------------------
-def _fundamental(
+def fundamental_from_poses(
     cam_a: CameraModel, pose_a: np.ndarray, cam_b: CameraModel, pose_b: np.ndarray
 ) -> np.ndarray:
     """F with x_b^T F x_a = 0 for OpenCV pixel coordinates, from world_from_cam poses."""
@@ -373,7 +373,7 @@ def _match(
                         gallery.images[gallery.index_of(a)],
                         gallery.images[gallery.index_of(b)],
                     )
-                    F = _fundamental(
+                    F = fundamental_from_poses(
                         gallery.cameras[ia.camera],
                         ia.world_from_cam,
                         gallery.cameras[ib.camera],
