@@ -81,8 +81,12 @@ METHODS: dict[str, MethodConf] = {
     "orb-teblid": MethodConf("orb-teblid", "nn-hamming", "vlad"),
     "aliked-lightglue": MethodConf("aliked", "lightglue-aliked", "effnet-gem"),
     "disk-lightglue": MethodConf("disk", "lightglue-disk", "effnet-gem"),
-    "xfeat-lighterglue": MethodConf("xfeat", "lighterglue-xfeat", "effnet-gem"),
-    "xfeat-lighterglue-4096": MethodConf("xfeat-4096", "lighterglue-xfeat", "effnet-gem"),
+    # VLAD over XFeat's own descriptors stands in for NetVLAD (a VLAD layer over learned
+    # features), as for SIFT: it keeps finding the place at night where EfficientNet-GeM loses it
+    "xfeat-lighterglue": MethodConf("xfeat", "lighterglue-xfeat", "vlad"),
+    # its retrieval before 2026-12-05: ImageNet's EfficientNet-Lite0 with GeM pooling
+    "xfeat-lighterglue-gem": MethodConf("xfeat", "lighterglue-xfeat", "effnet-gem"),
+    "xfeat-lighterglue-4096": MethodConf("xfeat-4096", "lighterglue-xfeat", "vlad"),
 }
 
 
