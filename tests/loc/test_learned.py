@@ -185,6 +185,26 @@ def test_image_normalized_retrieval_describes_a_darker_image_as_the_same_place(o
         EfficientNetGem(input_norm="contrast")
 
 
+def test_the_learned_method_retrieves_a_darker_image_by_its_own_descriptors(offline, gallery):
+    """xfeat-lighterglue retrieves with VLAD over XFeat's descriptors, its vocabulary from the
+    gallery: a uniformly darker image of a place (which ImageNet's EfficientNet-GeM places
+    elsewhere, the test above) is its own place first."""
+    from vlocbench.loc.registry import build_features, build_retrieval, method_conf
+
+    conf = method_conf("xfeat-lighterglue")
+    extractor, retrieval = build_features(conf.features), build_retrieval(conf.retrieval)
+    assert retrieval is not None and retrieval.name == "vlad"
+    images = [gallery.load_image(n) for n in gallery.names]
+    features = [extractor.extract(image) for image in images]
+    retrieval.fit(features)
+    described = np.stack([retrieval.describe(i, f) for i, f in zip(images, features)])
+    day = gallery.load_image(gallery.names[10])
+    night = np.round(day.astype(np.float64) / 16.0).astype(np.uint8)  # 4 stops darker, quantized
+    query = retrieval.describe(night, extractor.extract(night))
+    similarity = described @ query
+    assert int(np.sum(similarity > similarity[10])) == 0
+
+
 def test_the_device_is_auto_cpu_or_cuda(monkeypatch):
     from vlocbench.errors import ConfigError, UnknownNameError
     from vlocbench.loc.learned import EfficientNetGem, resolve_device
