@@ -35,7 +35,7 @@ FEATURES: dict[str, tuple[str, dict[str, Any]]] = {
     "disk": ("vlocbench.loc.learned:DiskExtractor", {"max_keypoints": 1024}),
     "xfeat": ("vlocbench.loc.learned:XFeatExtractor", {"max_keypoints": 1024}),
     # XFeat's own budget and the paper's SuperPoint's (hloc's superpoint_aachen: up to 4096):
-    # LighterGlue then takes about 20x as long a pair, for a GPU
+    # LighterGlue then takes about 25x as long a pair (bench_keypoints.py), for a GPU
     "xfeat-4096": ("vlocbench.loc.learned:XFeatExtractor", {"max_keypoints": 4096}),
 }
 MATCHERS: dict[str, tuple[str, dict[str, Any]]] = {
