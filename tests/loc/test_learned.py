@@ -41,7 +41,9 @@ def test_aliked_lightglue_and_effnet_localize_offline(
     root = tmp_path_factory.mktemp("learned")
     small = gallery.head(16, root / "gallery")
     out = root / "aliked"
-    report = build_map(small, method_conf("aliked-lightglue"), out, MappingConfig(num_pairs=3))
+    # the "-gem" preset: EfficientNet's weights load offline too
+    conf = method_conf("aliked-lightglue-gem")
+    report = build_map(small, conf, out, MappingConfig(num_pairs=3))
     assert report.points > 300
     localizer = MapLocalizer(out)
     with Simulator(small_town) as sim:

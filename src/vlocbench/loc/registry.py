@@ -79,12 +79,14 @@ METHODS: dict[str, MethodConf] = {
     # sequential localization: the gallery images nearest to the EKF's pose, no global descriptor
     "sift-prior": MethodConf("sift", "nn-ratio", POSE_PRIOR),
     "orb-teblid": MethodConf("orb-teblid", "nn-hamming", "vlad"),
-    "aliked-lightglue": MethodConf("aliked", "lightglue-aliked", "effnet-gem"),
+    # VLAD over a learned method's own descriptors stands in for NetVLAD (a VLAD layer over
+    # learned features), as for SIFT: it keeps finding the place at night where
+    # EfficientNet-GeM loses it (measured for XFeat and ALIKED; DISK's is not measured yet)
+    "aliked-lightglue": MethodConf("aliked", "lightglue-aliked", "vlad"),
     "disk-lightglue": MethodConf("disk", "lightglue-disk", "effnet-gem"),
-    # VLAD over XFeat's own descriptors stands in for NetVLAD (a VLAD layer over learned
-    # features), as for SIFT: it keeps finding the place at night where EfficientNet-GeM loses it
     "xfeat-lighterglue": MethodConf("xfeat", "lighterglue-xfeat", "vlad"),
-    # its retrieval before 2026-12-05: ImageNet's EfficientNet-Lite0 with GeM pooling
+    # their retrieval before 2026-12-05: ImageNet's EfficientNet-Lite0 with GeM pooling
+    "aliked-lightglue-gem": MethodConf("aliked", "lightglue-aliked", "effnet-gem"),
     "xfeat-lighterglue-gem": MethodConf("xfeat", "lighterglue-xfeat", "effnet-gem"),
     "xfeat-lighterglue-4096": MethodConf("xfeat-4096", "lighterglue-xfeat", "vlad"),
 }
