@@ -4,6 +4,7 @@
                                             [--queries 60] [--max-gain 512] [--shot-noise 0.02]
                                             [--read-noise 0.02] [--retrieval map|pose-prior]
                                             [--experiment FILE] [--shadows]
+                                            [--tone-curve filmic] [--gallery-tone-curve gamma]
                                             [--viewpoint "0,0;2,10;4,22.5"] [--setups FILE]
 
 Renders the gallery camera at ``--queries`` poses spread along the route (half-way between gallery
@@ -18,7 +19,9 @@ map's retrieval: the local features alone, to tell their misses from the retriev
 ``--experiment FILE`` takes ``--town`` and ``--method`` with their settings (gallery, mapping,
 localizer) from an experiment, so the maps are that experiment's; a preset method the experiment
 does not name runs on its gallery and mapping. ``--shadows``: the sun casts
-shadows in the gallery (its own gallery and maps) and in the queries. ``--viewpoint`` sweeps the
+shadows in the gallery (its own gallery and maps) and in the queries; ``--tone-curve filmic``:
+CARLA's camera's tone curve, the gallery's too unless ``--gallery-tone-curve`` says otherwise (the
+queries' curve against a map of the other: the curve's effect without a new map). ``--viewpoint`` sweeps the
 query camera's (raise m, pitch down deg) levels instead, at the first ``--k`` (the paper's Table 3
 has no recall to print beside). ``--setups FILE`` sweeps the conditions of that experiment's setups
 (``experiments/paper/weather.yaml``: the paper's fog and rain) with any method's map.
@@ -46,6 +49,7 @@ from vlocbench.geometry import planar_pose, pose_error
 from vlocbench.loc.localizer import RETRIEVAL_SOURCES
 from vlocbench.nav import WaypointPath
 from vlocbench.sim import Conditions, Exposure, Illumination, Simulator, Viewpoint, Weather
+from vlocbench.sim.light import TONE_CURVES
 
 STAGES = ("features", "retrieval", "matching", "pnp")
 
@@ -97,6 +101,10 @@ def main() -> None:
         help="take --town and --method with their settings from this file",
     )
     ap.add_argument("--shadows", action="store_true", help="the sun's shadows, gallery too")
+    ap.add_argument("--tone-curve", default=defaults.tone_curve, choices=TONE_CURVES)
+    ap.add_argument(
+        "--gallery-tone-curve", choices=TONE_CURVES, help="the gallery's (default: --tone-curve)"
+    )
     ap.add_argument("--viewpoint", help='(dz m, pitch down deg) levels, "0,0;2,10"')
     ap.add_argument("--setups", type=Path, help="sweep the conditions of this experiment's setups")
     ap.add_argument(
@@ -106,10 +114,17 @@ def main() -> None:
     )
     args = ap.parse_args()
     plan = method_plan(args.experiment, args.town, args.method)
-    if args.shadows:  # the gallery too: its own gallery and maps
+    gallery_tone = args.gallery_tone_curve or args.tone_curve
+    if args.shadows or gallery_tone != defaults.tone_curve:
+        # the gallery too: its own gallery and maps
         g = plan.spec.gallery
-        shaded = dataclasses.replace(g, conditions=dataclasses.replace(g.conditions, shadows=True))
-        plan = resolve(dataclasses.replace(plan.spec, gallery=shaded))
+        seen = dataclasses.replace(
+            g.conditions,
+            shadows=args.shadows or g.conditions.shadows,
+            exposure=dataclasses.replace(g.conditions.exposure, tone_curve=gallery_tone),
+        )
+        gallery = dataclasses.replace(g, conditions=seen)
+        plan = resolve(dataclasses.replace(plan.spec, gallery=gallery))
     map_dir = prepare_maps(plan, progress=True)[(args.town, args.method)]
     town = town_named(args.town)
     route = route_named(args.town, plan.spec.route_length_m)  # the experiment's cut, if any
@@ -117,14 +132,17 @@ def main() -> None:
     config = dataclasses.replace(plan.spec.methods[0].localizer, retrieval=args.retrieval)
     localizer = VisualLocalizer(map_dir, (camera,), config, name=args.method)
     exposure = Exposure(
-        max_gain=args.max_gain, shot_noise=args.shot_noise, read_noise=args.read_noise
+        max_gain=args.max_gain,
+        shot_noise=args.shot_noise,
+        read_noise=args.read_noise,
+        tone_curve=args.tone_curve,
     )
     xy, yaws = route_queries(route, args.queries)
     paper = paper_results().tables["illumination"]
     t1_paper = {m: dict(zip(paper.recall_levels, v)) for m, v in paper.recall_t1[args.town].items()}
     print(
         f"{args.town}, {args.method}, {args.queries} queries, retrieval {args.retrieval}; "
-        f"{exposure}; shadows {args.shadows}"
+        f"{exposure}; shadows {args.shadows}; gallery tone curve {gallery_tone}"
     )
     # gain: the sensor's; exposure: the share of the metered exposure it reached (1: none short)
     # answered: a pose returned; wrong: answered beyond (5 m, 10 deg); R@5: one of the retrieval's

@@ -44,6 +44,8 @@ def test_bad_values_name_their_field():
         Exposure(shot_noise=-0.1)
     with pytest.raises(ConfigError, match=r"exposure\.read_noise: must be >= 0"):
         Exposure(read_noise=-1.0)
+    with pytest.raises(UnknownNameError, match="tone_curve 'aces'; valid: filmic, gamma"):
+        from_dict(Exposure, {"tone_curve": "aces"})
     with pytest.raises(ConfigError, match=r"weather\.fog_ramp_m: must be > 0"):
         Weather(fog_visual_range_m=30, fog_ramp_m=0)
     with pytest.raises(UnknownNameError, match="valid: exponential, starts_at"):

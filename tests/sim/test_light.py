@@ -10,7 +10,9 @@ from vlocbench.sim.light import (
     air_mass,
     daylight,
     exposure_gain,
+    filmic,
     sensor_noise,
+    tone_curve,
 )
 
 
@@ -67,3 +69,21 @@ def test_noiseless_sensor_returns_the_render_c_ordered():
     got = sensor_noise(image, 96.0, 0.0, 0.0, np.random.default_rng(2))
     np.testing.assert_array_equal(got, image)
     assert got.flags.c_contiguous
+
+
+def test_filmic_curve_keeps_mid_grey_and_crushes_the_toe():
+    assert filmic(np.array(0.18)) == pytest.approx(0.18, abs=1e-6)
+    x = np.logspace(-6, 3, 500)
+    y = filmic(x)
+    assert np.all(np.diff(y) >= 0) and y[0] >= 0 and y[-1] == 1.0  # white clip beyond 1
+    # deep in the toe a power law of exponent 2 slope / (toe scale ln 10) = 1.70: a tenth of
+    # the light gives a fiftieth of the output, where a gamma would give a tenth
+    assert filmic(np.array(1e-4)) / filmic(np.array(1e-5)) == pytest.approx(10**1.698, rel=0.02)
+    assert 0.6 < filmic(np.array(1.0)) < 0.8  # the shoulder rolls white off
+    assert filmic(np.array(0.0)) == pytest.approx(0.0, abs=1e-12)
+    assert tone_curve("gamma") is None
+    lut = tone_curve("filmic")
+    assert lut is not None and lut.shape == (256,) and lut.dtype == np.uint8
+    assert np.all(np.diff(lut.astype(int)) >= 0)
+    assert lut[0] == 0 and abs(int(lut[118]) - 118) <= 1  # mid-grey's display value stays
+    assert lut[15] <= 5  # 0.2 % of white: 15 grey levels through the gamma, black through it

@@ -25,6 +25,7 @@ from vlocbench.sim import (
     load_town_spec,
 )
 from vlocbench.sim.camera import project
+from vlocbench.sim.light import tone_curve
 
 SMALL = Intrinsics(320, 240, 90.0)
 
@@ -303,6 +304,24 @@ def test_beyond_its_range_the_camera_records_the_share_of_exposure_it_reached(sm
     expected = (share ** (1 / 2.2)) * full.image.astype(float).mean()
     assert dark.image.astype(float).mean() == pytest.approx(expected, rel=0.03)
     assert dark.image.mean() > 3 * share * full.image.mean()  # far brighter than linear
+
+
+def test_carlas_tone_curve_blacks_out_the_unlit_night_and_keeps_noon(small_sim):
+    """``tone_curve: filmic`` maps every rendered grey level through CARLA's camera curve: at noon
+    much the same picture, at night (k = 10) the dimly lit facades fall to black."""
+    filmic = Exposure(tone_curve="filmic")
+    lut = tone_curve("filmic")
+    assert lut is not None
+    for k in (0, 10):
+        plain = render(small_sim, Conditions(illumination=Illumination(k=k)))
+        toned = render(small_sim, Conditions(illumination=Illumination(k=k), exposure=filmic))
+        # a lookup on the render, pixel for pixel (the default camera adds no noise)
+        np.testing.assert_array_equal(toned.image, lut[plain.image])
+        dark_plain, dark_toned = (np.mean(gray(f) <= 5) for f in (plain, toned))
+        if k == 0:
+            assert gray(toned).mean() == pytest.approx(gray(plain).mean(), rel=0.25)
+        else:
+            assert dark_toned > dark_plain + 0.3, (dark_plain, dark_toned)
 
 
 def test_an_aliased_camera_sees_the_same_scene_with_harder_edges(small_sim):

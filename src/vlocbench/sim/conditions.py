@@ -14,6 +14,7 @@ import numpy as np
 
 from vlocbench.config import ADDED_OPTION, default_changed, require, require_one_of
 from vlocbench.errors import UnknownNameError
+from vlocbench.sim.light import TONE_CURVES
 
 Season = Literal["summer", "autumn", "winter"]
 SEASONS: tuple[str, ...] = ("summer", "autumn", "winter")
@@ -220,6 +221,9 @@ class StreetLights:
         return self.mode == "on" or (self.mode == "auto" and daylight_share < self.switch_on_below)
 
 
+ToneCurve = Literal["filmic", "gamma"]
+
+
 @dataclass(frozen=True)
 class Exposure:
     """The camera, by default CARLA's kind (the paper's): ``auto`` exposure meters the daylight and
@@ -230,7 +234,10 @@ class Exposure:
     level (``benchmarks/bench_illumination.py``; docs/calibration.md). Sensor noise, if wanted,
     grows with the gain: photon shot noise (variance ``shot_noise`` x gain per grey level) and
     read noise (``read_noise`` x gain grey levels); ``Exposure(max_gain=65536, shot_noise=0.03)`` is
-    vlocbench's earlier night, a bright image paid for in shot noise (docs/fidelity.md)."""
+    vlocbench's earlier night, a bright image paid for in shot noise (docs/fidelity.md).
+    ``tone_curve``: ``gamma`` (the default) leaves the render as it is, each light scaled by the
+    exposure through the display gamma; ``filmic`` is CARLA's camera (UE4's filmic tone mapper at
+    its defaults), whose toe crushes the dimly lit to black (a departure: docs/fidelity.md)."""
 
     mode: Literal["auto", "fixed"] = "auto"
     # 6.3 stops: fitted on town01's SIFT T1 recall at k = 8 (docs/calibration.md), on scene 8; 112
@@ -239,9 +246,11 @@ class Exposure:
     max_gain: float = field(default=80.0, metadata=default_changed(128.0))
     shot_noise: float = 0.0
     read_noise: float = 0.0
+    tone_curve: ToneCurve = field(default="gamma", metadata=ADDED_OPTION)
 
     def __post_init__(self) -> None:
         require(self.mode in ("auto", "fixed"), "exposure.mode", "must be auto or fixed")
+        require_one_of(self.tone_curve, TONE_CURVES, "exposure.tone_curve")
         require(self.max_gain >= 1, "exposure.max_gain", "must be >= 1")
         require(self.shot_noise >= 0, "exposure.shot_noise", "must be >= 0")
         require(self.read_noise >= 0, "exposure.read_noise", "must be >= 0")

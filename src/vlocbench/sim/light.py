@@ -19,6 +19,13 @@ The town's own lights (street lamps, lit windows) are set in the same display va
 noise grows with the gain: photon shot noise (variance ``shot_noise * gain`` per grey level) and
 read noise (``read_noise * gain``). The camera's range is fitted once, on the recall the paper
 measured at one level (``benchmarks/bench_illumination.py``; docs/calibration.md).
+
+Between the exposure and the encoding, CARLA's camera (Unreal Engine 4's post-process, which the
+paper's code leaves at its defaults) applies a filmic tone curve: in log10 of the scene-linear
+value it is a straight line of slope 0.88 through mid-grey (0.18 in, 0.18 out), joined to a
+logistic toe below and shoulder above. Its toe crushes what a plain gamma keeps: a facade at 0.2 %
+of white, 15 grey levels through the gamma, is black through the curve. ``tone_curve("filmic")``
+is that curve; ``"gamma"`` (vlocbench's camera) leaves the image as rendered.
 """
 
 from __future__ import annotations
@@ -31,6 +38,15 @@ NOON_DIRECT = 0.7  # diffuse colour of the sun light at noon (MuJoCo light units
 NOON_AMBIENT = 0.35  # ambient (sky) light at noon
 BEAM_TRANSMITTANCE = 0.7  # Meinel and Meinel: beam fraction through one clear air mass
 DISPLAY_GAMMA = 2.2  # the camera's output encoding: display value = linear ** (1 / 2.2)
+TONE_CURVES = ("filmic", "gamma")
+# UE4's filmic tone mapper at the defaults of CARLA's RGB camera (its blueprint's slope, toe,
+# shoulder, black_clip and white_clip attributes)
+FILM_SLOPE = 0.88
+FILM_TOE = 0.55
+FILM_SHOULDER = 0.26
+FILM_BLACK_CLIP = 0.0
+FILM_WHITE_CLIP = 0.04
+FILM_MID_GREY = 0.18  # the curve leaves mid-grey where it is
 
 
 def air_mass(elevation_rad: float) -> float:
@@ -101,3 +117,45 @@ def sensor_noise(
     rgb += noise[..., None]
     rgb += 0.5
     return np.clip(rgb, 0, 255, out=rgb).astype(np.uint8)
+
+
+def filmic(linear: np.ndarray) -> np.ndarray:
+    """UE4's filmic tone curve at CARLA's defaults on scene-linear values at the metered exposure
+    (any shape, >= 0), per channel (without the ACES colour transforms around it); the output is
+    linear in [0, 1], before the display encoding."""
+    toe_scale = 1 + FILM_BLACK_CLIP - FILM_TOE
+    shoulder_scale = 1 + FILM_WHITE_CLIP - FILM_SHOULDER
+    # mid-grey on the toe (FILM_TOE <= 0.8): where the toe's logistic passes through it
+    b = (FILM_MID_GREY + FILM_BLACK_CLIP) / toe_scale - 1
+    toe_at = np.log10(FILM_MID_GREY) - 0.5 * np.log((1 + b) / (1 - b)) * toe_scale / FILM_SLOPE
+    offset = (1 - FILM_TOE) / FILM_SLOPE - toe_at  # the straight part: slope * (log + offset)
+    shoulder_at = FILM_SHOULDER / FILM_SLOPE - offset
+    with np.errstate(over="ignore"):
+        # black (and below) at 1e-12: far down the toe, so the curve gives 0 there
+        log = np.log10(np.maximum(np.asarray(linear, np.float64), 1e-12))
+        straight = FILM_SLOPE * (log + offset)
+        toe = -FILM_BLACK_CLIP + 2 * toe_scale / (
+            1 + np.exp(-2 * FILM_SLOPE / toe_scale * (log - toe_at))
+        )
+        shoulder = (1 + FILM_WHITE_CLIP) - 2 * shoulder_scale / (
+            1 + np.exp(2 * FILM_SLOPE / shoulder_scale * (log - shoulder_at))
+        )
+    low = np.where(log < toe_at, toe, straight)
+    high = np.where(log > shoulder_at, shoulder, straight)
+    # a smooth blend from the toe to the shoulder (at these defaults the two overlap, the
+    # shoulder starting below the toe's end, so the blend runs the other way)
+    t = np.clip((log - toe_at) / (shoulder_at - toe_at), 0.0, 1.0)
+    if shoulder_at < toe_at:
+        t = 1 - t
+    t = t * t * (3 - 2 * t)
+    return np.clip(low + (high - low) * t, 0.0, 1.0)
+
+
+def tone_curve(name: str) -> np.ndarray | None:
+    """The camera's tone curve as a lookup table over the rendered (display-encoded) grey levels,
+    (256,) uint8, or None for ``gamma`` (the render as it is)."""
+    if name == "gamma":
+        return None
+    display = np.arange(256) / 255.0
+    toned = filmic(display**DISPLAY_GAMMA) ** (1 / DISPLAY_GAMMA)
+    return np.round(255 * toned).astype(np.uint8)

@@ -25,6 +25,7 @@ from vlocbench.sim.light import (
     daylight,
     exposure_gain,
     sensor_noise,
+    tone_curve,
 )
 from vlocbench.sim.rain import apply_puddles, apply_rain
 from vlocbench.sim.scene import (
@@ -126,6 +127,7 @@ class Renderer:
         # the scene is lit as the camera records it (MuJoCo's colours are display values): at
         # the metered exposure g where the camera reaches it; one that cannot (beyond its range,
         # or fixed) records the share it reached, darker through its gamma
+        self._tone = tone_curve(e.tone_curve)
         g = exposure_gain(light, noon, headlight_reading, np.inf)
         self.gain = min(g, e.max_gain) if e.mode == "auto" else 1.0
         self.exposure_share = self.gain / g
@@ -291,6 +293,8 @@ class Renderer:
                 self.conditions.weather.rain_streaks_per_kpx,
                 np.random.default_rng(seed),
             )
+        if self._tone is not None:
+            image = self._tone[image]
         e = self.conditions.exposure
         return sensor_noise(
             image, self.gain, e.shot_noise, e.read_noise, np.random.default_rng(seed + 1)
