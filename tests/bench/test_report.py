@@ -82,3 +82,21 @@ def test_a_sweep_stored_in_part_has_a_verdict_over_its_stored_levels(tmp_path):
         md = write_report(tmp_path / folder, examples=False, plan=whole).markdown.read_text()
         verdict = md.split("verdict, over illumination.k")[1].split("\n\n**")[0]
         assert f"| sift | k=8 | {crossed} |" in verdict, folder
+
+
+def test_a_cell_with_fewer_repetitions_than_planned_says_how_many(tmp_path):
+    """Two repetitions planned (three of the odometry line), one run: the failure table gives
+    each cell's count beside its F, and its caption the plan's."""
+    from vlocbench.bench.report import write_report
+
+    whole = load_experiment({**ILL_SPEC, "repetitions": 2, "baseline_repetitions": 3})
+    run_fake_plans(tmp_path, whole.only(repetitions=1))
+    md = write_report(tmp_path, examples=False, plan=whole).markdown.read_text()
+    caption, table = md.split("failure rate F (failures/km")[1].split("\n\n", 1)
+    assert "over 2 repetitions, odometry only over 3;" in caption
+    rows = table.split("\n\n**")[0]
+    assert "| sift |" in rows and "(1 of 2) |" in rows.split("| sift |")[1].split("\n")[0]
+    assert "(1 of 3) |" in rows.split("| odometry only |")[1].split("\n")[0]
+    run_fake_plans(tmp_path, whole)  # the rest: counts no longer shown
+    md = write_report(tmp_path, examples=False, plan=whole).markdown.read_text()
+    assert " of 2)" not in md and " of 3)" not in md

@@ -39,6 +39,7 @@ from vlocbench.bench.report.tables import (
     not_stored_line,
     per_town_table,
     place_recall_table,
+    planned_repetitions,
     ranking_table,
     recall_table,
     requirements_table,
@@ -52,7 +53,7 @@ from vlocbench.bench.requirements import (
 )
 from vlocbench.bench.runs import Experiment, stored_episodes
 from vlocbench.bench.store import EpisodeRow, StoreError, read_episode_table
-from vlocbench.bench.summary import Summary, summarize
+from vlocbench.bench.summary import BASELINE, Summary, summarize
 
 REPORT_DIR = "report"
 __all__ = [
@@ -101,6 +102,11 @@ def drive_figures(summary: Summary, rows: Sequence[EpisodeRow], output_dir: Path
 def report_tables(summary: Summary, drives: DriveFigures | None = None) -> list[tuple[str, Table]]:
     out = []
     curves = drives.curves if drives else {}
+    odometry_runs = (
+        f", odometry only over {planned_repetitions(summary, BASELINE)}"
+        if summary.spec.baseline
+        else ""
+    )
     for town in summary.towns:
         name = summary.town_names[town]
         sweeps = oracle_sweeps(summary, town)
@@ -125,7 +131,8 @@ def report_tables(summary: Summary, drives: DriveFigures | None = None) -> list[
         out.append(
             (
                 f"{name}: failure rate F (failures/km, mean [bootstrap 95 % CI] over "
-                f"{summary.spec.repetitions} repetitions) and computation time per query",
+                f"{summary.spec.repetitions} repetitions{odometry_runs}; a cell with fewer "
+                "stored gives its count) and computation time per query",
                 failure_table(summary, town),
             )
         )

@@ -53,19 +53,32 @@ def fmt(value: float, digits: int = 1) -> str:
     return "–" if value is None or not np.isfinite(value) else f"{value:.{digits}f}"
 
 
+def planned_repetitions(summary: Summary, method: str) -> int:
+    """The failure drives the experiment plans per cell of ``method`` (the odometry line's
+    max(repetitions, baseline_repetitions))."""
+    s = summary.spec
+    return max(s.repetitions, s.baseline_repetitions) if method == BASELINE else s.repetitions
+
+
 def failure_table(summary: Summary, town: str) -> Table:
+    """F, mean [bootstrap 95 %] of each cell; a cell with fewer repetitions stored than planned
+    (a run not finished, or a cut of it) says how many it has."""
     header = ["method", *(setup_header(summary, s.label) for s in summary.setups), "CT (ms)"]
     rows = []
     for method in summary.methods:
         row = [method_label(method)]
         cts = []
+        planned = planned_repetitions(summary, method)
         for s in summary.setups:
             c = summary.cell(town, method, s.label)
             if c is None or c.failure is None:
                 row.append("–")
                 continue
             f = c.failure
-            row.append(f"{fmt(f.mean)} [{fmt(f.low)}, {fmt(f.high)}]")
+            text = f"{fmt(f.mean)} [{fmt(f.low)}, {fmt(f.high)}]"
+            if f.repetitions < planned:
+                text += f" ({f.repetitions} of {planned})"
+            row.append(text)
             cts.append(c.ct_s)
         finite = [v for v in cts if np.isfinite(v)]
         row.append(fmt(1000 * float(np.mean(finite)), 0) if finite else "–")
