@@ -377,3 +377,15 @@ def test_the_place_revision_keys_only_episodes_of_a_camera_mounted_otherwise(mon
     yaw = "camera.extrinsics.yaw_deg="
     assert turned_before[yaw + "-90"] == turned_after[yaw + "-90"]
     assert turned_before[yaw + "-60"] != turned_after[yaw + "-60"]
+
+
+def test_a_query_camera_with_another_tone_curve_than_the_gallerys_is_said():
+    base = {"name": "x", "towns": ["town10"], "methods": ["sift"]}
+    swept = load_experiment({**base, "sweep": {"exposure.tone_curve": ["gamma", "filmic"]}})
+    (said,) = swept.camera_mismatches()
+    assert said.startswith("setup exposure.tone_curve=filmic: its queries go through the filmic")
+    assert "gallery: {conditions: {exposure: {tone_curve: filmic}}}" in said
+    one_camera = {"conditions": {"exposure": {"tone_curve": "filmic"}}}
+    same = {**base, "gallery": one_camera, "sweep": {"exposure.tone_curve": ["filmic"]}}
+    assert load_experiment(same).camera_mismatches() == []
+    assert load_experiment(base).camera_mismatches() == []

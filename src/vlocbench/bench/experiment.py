@@ -261,6 +261,18 @@ class ExperimentPlan:
     def output_dir(self) -> Path:
         return self.spec.output_dir
 
+    def camera_mismatches(self) -> list[str]:
+        """The setups whose queries the camera records through another tone curve than the
+        gallery's (the map and the queries from different cameras: rarely meant), each said."""
+        gallery = self.spec.gallery.conditions.exposure.tone_curve
+        return [
+            f"setup {s.label}: its queries go through the {s.conditions.exposure.tone_curve} "
+            f"tone curve, the gallery through {gallery} (for one camera set gallery: "
+            f"{{conditions: {{exposure: {{tone_curve: {s.conditions.exposure.tone_curve}}}}}}})"
+            for s in self.setups
+            if s.conditions.exposure.tone_curve != gallery
+        ]
+
     def with_output(self, output: str | Path) -> ExperimentPlan:
         """The same plan writing its results to ``output``."""
         return dataclasses.replace(self, spec=dataclasses.replace(self.spec, output=str(output)))

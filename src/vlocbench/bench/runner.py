@@ -65,6 +65,8 @@ def run_experiment(
     :mod:`vlocbench.bench.shared_drive`), for measuring what sharing saves."""
     check_workers(workers)  # before hours of gallery and map building, not after
     check_methods(plan.spec.methods)
+    for mismatch in plan.camera_mismatches():
+        logger.warning(f"{plan.name}: {mismatch}")
     t0 = time.perf_counter()
     with ResultStore(plan.output_dir, plan.name) as store:
         maps = prepare_maps(plan, progress, workers if scheduler is None else 1)
