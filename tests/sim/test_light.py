@@ -3,6 +3,7 @@ import itertools
 import numpy as np
 import pytest
 
+from vlocbench.errors import UnknownNameError
 from vlocbench.sim.conditions import Illumination
 from vlocbench.sim.light import (
     NOON_AMBIENT,
@@ -82,6 +83,8 @@ def test_filmic_curve_keeps_mid_grey_and_crushes_the_toe():
     assert 0.6 < filmic(np.array(1.0)) < 0.8  # the shoulder rolls white off
     assert filmic(np.array(0.0)) == pytest.approx(0.0, abs=1e-12)
     assert tone_curve("gamma") is None
+    with pytest.raises(UnknownNameError, match="tone_curve 'aces'; valid: filmic, gamma"):
+        tone_curve("aces")
     lut = tone_curve("filmic")
     assert lut is not None and lut.shape == (256,) and lut.dtype == np.uint8
     assert np.all(np.diff(lut.astype(int)) >= 0)

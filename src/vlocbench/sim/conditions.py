@@ -14,7 +14,7 @@ import numpy as np
 
 from vlocbench.config import ADDED_OPTION, default_changed, require, require_one_of
 from vlocbench.errors import UnknownNameError
-from vlocbench.sim.light import TONE_CURVES
+from vlocbench.sim.light import TONE_CURVES, ToneCurve
 
 Season = Literal["summer", "autumn", "winter"]
 SEASONS: tuple[str, ...] = ("summer", "autumn", "winter")
@@ -219,9 +219,6 @@ class StreetLights:
     def on(self, daylight_share: float) -> bool:
         """Whether the lights are on when the ground gets ``daylight_share`` of noon's light."""
         return self.mode == "on" or (self.mode == "auto" and daylight_share < self.switch_on_below)
-
-
-ToneCurve = Literal["filmic", "gamma"]
 
 
 @dataclass(frozen=True)

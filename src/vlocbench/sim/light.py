@@ -31,14 +31,18 @@ is that curve; ``"gamma"`` (vlocbench's camera) leaves the image as rendered.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal, get_args
 
 import numpy as np
+
+from vlocbench.config import require_one_of
 
 NOON_DIRECT = 0.7  # diffuse colour of the sun light at noon (MuJoCo light units)
 NOON_AMBIENT = 0.35  # ambient (sky) light at noon
 BEAM_TRANSMITTANCE = 0.7  # Meinel and Meinel: beam fraction through one clear air mass
 DISPLAY_GAMMA = 2.2  # the camera's output encoding: display value = linear ** (1 / 2.2)
-TONE_CURVES = ("filmic", "gamma")
+ToneCurve = Literal["filmic", "gamma"]
+TONE_CURVES: tuple[str, ...] = get_args(ToneCurve)
 # UE4's filmic tone mapper at the defaults of CARLA's RGB camera (its blueprint's slope, toe,
 # shoulder, black_clip and white_clip attributes)
 FILM_SLOPE = 0.88
@@ -154,6 +158,7 @@ def filmic(linear: np.ndarray) -> np.ndarray:
 def tone_curve(name: str) -> np.ndarray | None:
     """The camera's tone curve as a lookup table over the rendered (display-encoded) grey levels,
     (256,) uint8, or None for ``gamma`` (the render as it is)."""
+    require_one_of(name, TONE_CURVES, "tone_curve")
     if name == "gamma":
         return None
     display = np.arange(256) / 255.0

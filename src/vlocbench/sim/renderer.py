@@ -124,10 +124,10 @@ class Renderer:
         e = conditions.exposure
         noon = daylight(1.0, ill.sun_elevation_base_rad, 0.0, ill.sun_elevation_base_rad)
         headlight_reading = HEADLIGHT_METERING * h.intensity if h.on else 0.0
+        self._tone = tone_curve(e.tone_curve)  # applied to each finished image (render)
         # the scene is lit as the camera records it (MuJoCo's colours are display values): at
         # the metered exposure g where the camera reaches it; one that cannot (beyond its range,
         # or fixed) records the share it reached, darker through its gamma
-        self._tone = tone_curve(e.tone_curve)
         g = exposure_gain(light, noon, headlight_reading, np.inf)
         self.gain = min(g, e.max_gain) if e.mode == "auto" else 1.0
         self.exposure_share = self.gain / g
