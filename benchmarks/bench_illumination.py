@@ -88,6 +88,17 @@ def route_queries(route: WaypointPath, count: int) -> tuple[np.ndarray, np.ndarr
     return xy, np.interp(s, route.s_m, np.unwrap(route.yaw_rad))
 
 
+def number_pairs(text: str) -> list[tuple[float, float]]:
+    """``"a,b;c,d"`` as [(a, b), (c, d)]: the levels of ``--viewpoint`` and ``--offset``."""
+    try:
+        pairs = [tuple(float(v) for v in p.split(",")) for p in text.split(";")]
+    except ValueError:
+        pairs = []
+    if not pairs or any(len(p) != 2 for p in pairs):
+        raise argparse.ArgumentTypeError(f'want number pairs as "a,b;c,d", got {text!r}')
+    return [(a, b) for a, b in pairs]
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--town", default="town10")
@@ -109,11 +120,14 @@ def main() -> None:
     ap.add_argument(
         "--gallery-tone-curve", choices=TONE_CURVES, help="the gallery's (default: --tone-curve)"
     )
-    ap.add_argument("--viewpoint", help='(dz m, pitch down deg) levels, "0,0;2,10"')
+    ap.add_argument(
+        "--viewpoint", type=number_pairs, help='(dz m, pitch down deg) levels, "0,0;2,10"'
+    )
     ap.add_argument("--setups", type=Path, help="sweep the conditions of this experiment's setups")
     ap.add_argument(
         "--offset",
-        default="0,0",
+        type=number_pairs,
+        default=[(0.0, 0.0)],
         help='the query car off the route: (m to its left, yaw deg to its left) pairs, "0,0;1,0"',
     )
     ap.add_argument(
@@ -168,22 +182,20 @@ def main() -> None:
     ]
     if args.viewpoint:
         noon = levels[0][1]
-        views = [tuple(float(v) for v in p.split(",")) for p in args.viewpoint.split(";")]
         levels = [
             (f"{dz:g} m, {deg:g} deg", dataclasses.replace(noon, viewpoint=Viewpoint(dz, deg)))
-            for dz, deg in views
+            for dz, deg in args.viewpoint
         ]
     if args.setups:
         levels = [(s.label, s.conditions) for s in load_experiment(args.setups).setups]
-    offsets = [tuple(float(v) for v in p.split(",")) for p in args.offset.split(";")]
     runs = [
         (
-            f"{label}, {left:g} m left, {yaw:g} deg" if offsets != [(0.0, 0.0)] else label,
+            f"{label}, {left:g} m left, {yaw:g} deg" if args.offset != [(0.0, 0.0)] else label,
             c,
             left,
             yaw,
         )
-        for left, yaw in offsets
+        for left, yaw in args.offset
         for label, c in levels
     ]
     sim = Simulator(town)

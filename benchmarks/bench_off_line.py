@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from vlocbench.bench.experiment import load_experiment
+from vlocbench.bench.experiment import ExperimentPlan, load_experiment
 from vlocbench.bench.metrics import WRONG_THRESHOLD
 from vlocbench.bench.preparation import prepare_gallery
 from vlocbench.bench.store import read_episode_table, read_episodes
@@ -36,9 +36,8 @@ CLASSES = (
 )
 
 
-def gallery_car_poses(experiment: Path, town: str, method: str) -> NDArray[np.float64]:
-    """(N, 3) x, y (m) and yaw (rad) of the car that took each gallery image."""
-    plan = load_experiment(experiment).only([town], [method])
+def gallery_car_poses(plan: ExperimentPlan, town: str) -> NDArray[np.float64]:
+    """(N, 3) x, y (m) and yaw (rad) of the car that took each of ``town``'s gallery images."""
     vehicle_from_cam = plan.spec.gallery.camera.extrinsics.vehicle_from_cam()
     cam_from_vehicle = invert_pose(vehicle_from_cam)
     poses = [im.world_from_cam @ cam_from_vehicle for im in prepare_gallery(plan, town).images]
@@ -77,7 +76,7 @@ def main() -> None:
     drives = sorted((t for t in tasks if t.kind == "failure"), key=lambda t: t.repetition)
     if not truth or not drives:
         raise SystemExit(f"{store} holds no ground-truth drive or no failure drive of that cut")
-    cars = gallery_car_poses(args.experiment, args.town, args.method)
+    cars = gallery_car_poses(plan, args.town)
     j, _, _, right = against_line(read_episode_table(store, truth[0].key, "localizations"), cars)
     # each gallery image's place: right if the ground-truth answer nearest to it was
     answered = np.unique(j)
