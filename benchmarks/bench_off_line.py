@@ -8,9 +8,9 @@ Reads the stored episodes of one town, method and setup of an experiment (the pr
 nothing stored under other maps or settings), no rendering. Each failure drive's answers are
 split by the place (whether the ground-truth drive's answer nearest to it along the route was
 right) and by where the car stood against the gallery's nearest image: its offset across the
-gallery car's heading (m) and its yaw against it (deg). An answer is right within (5 m, 10 deg),
-6-DoF, the confident-wrong threshold. Prints, per drive, the share right in each class and how
-many answers fell in it.
+gallery car's heading (m) and its yaw against it (deg); at the hard places, on that line or off
+it. An answer is right within (5 m, 10 deg), 6-DoF, the confident-wrong threshold. Prints, per
+drive, the share right in each class and how many answers fell in it.
 """
 
 from __future__ import annotations
@@ -87,8 +87,10 @@ def main() -> None:
         f"right ({len(right)} answers); a place is hard where its answer was wrong "
         f"({100 * (1 - place_right).mean():.0f} % of the gallery's places)"
     )
+    # at the hard places, whether the car was on the line: off it, an answer is counted at the
+    # place nearest to an excursion, which begins where the car failed
     print(
-        "drive | right % (answers) | at hard places | at easy places: "
+        f"drive | right % (answers) | at hard places: {CLASSES[0][0]} | off it | at easy places: "
         + " | ".join(c[0] for c in CLASSES)
     )
     for t in drives:
@@ -96,11 +98,16 @@ def main() -> None:
             read_episode_table(store, t.key, "localizations"), cars
         )
         easy = place_right[nearest]
-        cells = [f"{100 * ok.mean():.1f} ({len(ok)})", share(ok, ~easy)]
-        for _, (a0, a1), (y0, y1) in CLASSES:
-            cells.append(
-                share(ok, easy & (across >= a0) & (across < a1) & (dyaw >= y0) & (dyaw < y1))
-            )
+        within = [
+            (across >= a0) & (across < a1) & (dyaw >= y0) & (dyaw < y1)
+            for _, (a0, a1), (y0, y1) in CLASSES
+        ]
+        cells = [
+            f"{100 * ok.mean():.1f} ({len(ok)})",
+            share(ok, ~easy & within[0]),
+            share(ok, ~easy & ~within[0]),
+            *(share(ok, easy & w) for w in within),
+        ]
         print(f"rep {t.repetition} | " + " | ".join(cells))
 
 

