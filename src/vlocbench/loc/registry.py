@@ -33,7 +33,7 @@ FEATURES: dict[str, tuple[str, dict[str, Any]]] = {
     "orb-teblid": ("vlocbench.loc.features:OrbTeblidExtractor", {"max_keypoints": 2048}),
     "aliked": ("vlocbench.loc.learned:AlikedExtractor", {"max_keypoints": 1024}),
     # ALIKED's own mode (and LightGlue's): the keypoints scoring above 0.2, the strongest 1024 of
-    # them; a dark image gives fewer (town10: median 1024 at noon, 200 at k = 10)
+    # them; a dark image gives fewer (town10: median 1024 at noon, 210 at k = 10)
     "aliked-threshold": (
         "vlocbench.loc.learned:AlikedExtractor",
         {"max_keypoints": 1024, "detection_threshold": 0.2},
