@@ -26,8 +26,9 @@ def test_plugin_by_dotted_path_and_cache_reuse(gallery, tmp_path):
 def test_unknown_and_broken_methods():
     with pytest.raises(
         UnknownNameError,
-        match="aliked-lightglue, aliked-lightglue-gem, aliked-lightglue-threshold, disk-lightglue, orb-teblid, "
-        "sift, sift-gem, sift-prior, xfeat-lighterglue, xfeat-lighterglue-4096, xfeat-lighterglue-gem",
+        match="aliked-lightglue, aliked-lightglue-gem, aliked-lightglue-threshold, disk-lightglue, "
+        "disk-lightglue-gem, orb-teblid, sift, sift-gem, sift-prior, xfeat-lighterglue, "
+        "xfeat-lighterglue-4096, xfeat-lighterglue-gem",
     ):
         method_conf("superpoint")
     with pytest.raises(UnknownNameError, match="dotted path"):

@@ -87,13 +87,15 @@ METHODS: dict[str, MethodConf] = {
     "orb-teblid": MethodConf("orb-teblid", "nn-hamming", "vlad"),
     # VLAD over a learned method's own descriptors stands in for NetVLAD (a VLAD layer over
     # learned features), as for SIFT: it keeps finding the place at night where
-    # EfficientNet-GeM loses it (measured for XFeat and ALIKED; DISK's is not measured yet)
+    # EfficientNet-GeM loses it (measured for XFeat, ALIKED and DISK)
     "aliked-lightglue": MethodConf("aliked", "lightglue-aliked", "vlad"),
     "aliked-lightglue-threshold": MethodConf("aliked-threshold", "lightglue-aliked", "vlad"),
-    "disk-lightglue": MethodConf("disk", "lightglue-disk", "effnet-gem"),
+    "disk-lightglue": MethodConf("disk", "lightglue-disk", "vlad"),
     "xfeat-lighterglue": MethodConf("xfeat", "lighterglue-xfeat", "vlad"),
-    # their retrieval before 2026-12-05: ImageNet's EfficientNet-Lite0 with GeM pooling
+    # their retrieval before 2026-12-05 (DISK's before 2026-12-06): ImageNet's EfficientNet-Lite0
+    # with GeM pooling
     "aliked-lightglue-gem": MethodConf("aliked", "lightglue-aliked", "effnet-gem"),
+    "disk-lightglue-gem": MethodConf("disk", "lightglue-disk", "effnet-gem"),
     "xfeat-lighterglue-gem": MethodConf("xfeat", "lighterglue-xfeat", "effnet-gem"),
     "xfeat-lighterglue-4096": MethodConf("xfeat-4096", "lighterglue-xfeat", "vlad"),
 }

@@ -1,0 +1,180 @@
+"""Which wrong answers the EKF's gate lets through, and why: a store's failure drives taken apart.
+
+    python benchmarks/bench_gate.py --experiment experiments/paper/illumination.yaml
+                                    --town town10 --method xfeat-lighterglue --setup k=8,k=10
+
+Reads the stored failure drives of one town and method at each setup (the present plan's keys), no
+rendering. Each answer is right within (5 m, 10 deg), 6-DoF (the confident-wrong threshold). Its
+gate is reconstructed from the stored trajectory: the filter's rear-axle pose and covariance at
+the last step before the answer arrived (the query's time plus its latency), the answer moved to
+the rear axle as the episode does, and the Mahalanobis distance of the innovation with the
+episode's pose covariance; the share of answers where ``distance < gate`` agrees with the stored
+``fused`` says how exact that is. Prints, per setup, for the right answers fused, the wrong ones
+fused and the wrong ones rejected: how many, and medians of the innovation (m), of the filter's
+position sigma (m, sqrt(var x + var y)), of the distance, and of the PnP inliers (10th and 90th
+percentiles in brackets); the innovation the gate admits at the fused answers' median filter
+covariance (a purely positional one: gate x sqrt((var x + var y) / 2 + pose variance)); and what
+a floor on the PnP inliers (``--floors``) would have kept out of the filter; and how many of the
+drives' failures came within ``--window-s`` of a wrong answer fused (a failure's time: when the car
+was nearest to its site).
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from vlocbench.bench.experiment import load_experiment
+from vlocbench.bench.metrics import WRONG_THRESHOLD
+from vlocbench.bench.store import read_episode_table, read_episodes
+from vlocbench.geometry import wrap_angle
+
+
+def gate_distances(
+    answers: dict[str, NDArray], trajectory: dict[str, NDArray], rear_m: float, pose_cov: NDArray
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Per answer (N,): the Mahalanobis distance of its innovation against the filter before it
+    arrived, the innovation's length (m) and the filter's position sigma (m). ``trajectory``'s
+    pose and covariance are the vehicle's (the rear axle's moved forward by ``rear_m``)."""
+    t = trajectory["time_s"]
+    i = np.clip(np.searchsorted(t, answers["time_s"] + answers["latency_s"]) - 1, 0, len(t) - 1)
+    yaw_e = trajectory["ekf_yaw_rad"][i]
+    c, s = np.cos(yaw_e), np.sin(yaw_e)
+    rear_e = np.stack(
+        [trajectory["ekf_x_m"][i] - rear_m * c, trajectory["ekf_y_m"][i] - rear_m * s]
+    )
+    yaw_a = answers["yaw_rad"]
+    rear_a = np.stack(
+        [answers["x_m"] - rear_m * np.cos(yaw_a), answers["y_m"] - rear_m * np.sin(yaw_a)]
+    )
+    r = np.stack([*(rear_a - rear_e), wrap_angle(yaw_a - yaw_e)], axis=1)  # (N, 3)
+    cov = np.empty((len(i), 3, 3))
+    for (a, b), name in {
+        (0, 0): "xx_m2",
+        (0, 1): "xy_m2",
+        (0, 2): "xyaw_mrad",
+        (1, 1): "yy_m2",
+        (1, 2): "yyaw_mrad",
+        (2, 2): "yawyaw_rad2",
+    }.items():
+        cov[:, a, b] = cov[:, b, a] = trajectory[f"ekf_cov_{name}"][i]
+    # the stored covariance is the vehicle pose's: J P_rear J' with J = d(vehicle)/d(rear)
+    jac_inv = np.zeros((len(i), 3, 3))
+    jac_inv[:, 0, 0] = jac_inv[:, 1, 1] = jac_inv[:, 2, 2] = 1.0
+    jac_inv[:, 0, 2], jac_inv[:, 1, 2] = rear_m * s, -rear_m * c
+    p_rear = jac_inv @ cov @ jac_inv.transpose(0, 2, 1)
+    innovation_s = np.linalg.inv(p_rear + pose_cov)
+    d = np.sqrt(np.maximum(np.einsum("ni,nij,nj->n", r, innovation_s, r), 0.0))
+    sigma = np.sqrt(p_rear[:, 0, 0] + p_rear[:, 1, 1])
+    return d, np.hypot(r[:, 0], r[:, 1]), sigma
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--experiment", type=Path, required=True)
+    ap.add_argument("--town", required=True)
+    ap.add_argument("--method", required=True)
+    ap.add_argument("--setup", required=True, help="labels of the sweep, e.g. k=8,k=10")
+    ap.add_argument("--store", type=Path, help="default: the experiment's output")
+    ap.add_argument("--floors", default="50,100", help="inlier floors to try, e.g. 50,100")
+    ap.add_argument("--window-s", type=float, default=5.0, help="how long before a failure")
+    args = ap.parse_args()
+    labels = args.setup.split(",")
+    plan = load_experiment(args.experiment).only([args.town], [args.method], setups=labels)
+    store = args.store or plan.output_dir
+    metrics = {r.key: r.metrics for r in read_episodes(store) if r.metrics is not None}
+    for setup in plan.setups:
+        drives = [
+            t
+            for t in plan.tasks()
+            if t.kind == "failure" and t.setup.label == setup.label and t.key in metrics
+        ]
+        if not drives:
+            print(f"{setup.label}: no failure drive stored")
+            continue
+        gate = drives[0].episode.ekf.mahalanobis_gate
+        if gate is None:
+            raise SystemExit(f"{setup.label}: the filter has no Mahalanobis gate")
+        pose_cov = drives[0].episode.ekf.pose_covariance()
+        columns: dict[str, list[NDArray]] = {}
+        failures = followed = 0
+        for task in drives:
+            answers = read_episode_table(store, task.key, "localizations")
+            answered = answers["success"].astype(bool)
+            answers = {k: np.asarray(v)[answered] for k, v in answers.items()}
+            trajectory = read_episode_table(store, task.key, "trajectory")
+            d, innovation, sigma = gate_distances(
+                answers,
+                trajectory,
+                0.5 * task.episode.vehicle.wheelbase_m,  # the filter's rear axle, as the episode's
+                task.episode.ekf.pose_covariance(),
+            )
+            right = (answers["position_error_3d_m"] <= WRONG_THRESHOLD[0]) & (
+                answers["rotation_error_deg"] <= WRONG_THRESHOLD[1]
+            )
+            arrived_s = (answers["time_s"] + answers["latency_s"])[
+                ~right & answers["fused"].astype(bool)
+            ]
+            for x, y in metrics[task.key].failure_sites_xy:
+                # the failure's time: where the car truly was nearest to the failure's site
+                at = np.hypot(trajectory["true_x_m"] - x, trajectory["true_y_m"] - y).argmin()
+                t_s = trajectory["time_s"][at]
+                failures += 1
+                followed += bool(((arrived_s <= t_s) & (arrived_s > t_s - args.window_s)).any())
+            for name, v in (
+                ("d", d),
+                ("innovation", innovation),
+                ("sigma", sigma),
+                ("inliers", answers["inliers"].astype(float)),
+                ("fused", answers["fused"].astype(bool)),
+                ("right", right),
+            ):
+                columns.setdefault(name, []).append(v)
+        a = {k: np.concatenate(v) for k, v in columns.items()}
+        agree = np.mean((a["d"] < gate) == a["fused"])
+        print(
+            f"{args.town}, {args.method}, {setup.label}: {len(drives)} drives, "
+            f"{len(a['d'])} answers; the reconstructed gate agrees with the stored one on "
+            f"{100 * agree:.1f} %"
+        )
+        for name, where in (
+            ("right, fused", a["right"] & a["fused"]),
+            ("wrong, fused", ~a["right"] & a["fused"]),
+            ("wrong, rejected", ~a["right"] & ~a["fused"]),
+        ):
+            cells = [
+                f"{stat(a[k][where])} {k}"
+                for k in ("innovation", "sigma", "d", "inliers")
+                if where.any()
+            ]
+            print(f"  {name}: {int(where.sum())} | " + " | ".join(cells))
+        print(
+            f"  failures with a wrong answer fused in the {args.window_s:g} s before: "
+            f"{followed} of {failures}"
+        )
+        fused = a["fused"]
+        if fused.any():
+            var = np.median(a["sigma"][fused]) ** 2 / 2 + pose_cov[0, 0]
+            print(
+                f"  admitted at the fused answers' median covariance: {gate * np.sqrt(var):.1f} m"
+            )
+        for floor in (int(v) for v in args.floors.split(",")):
+            under = a["inliers"] < floor
+            print(
+                f"  a floor of {floor} inliers would have kept out "
+                f"{int((under & fused & ~a['right']).sum())} of the wrong answers fused and "
+                f"{int((under & fused & a['right']).sum())} of the right ones"
+            )
+
+
+def stat(v: NDArray[np.float64]) -> str:
+    """Median [10th, 90th percentile]."""
+    lo, med, hi = np.percentile(v, [10, 50, 90])
+    return f"{med:.2f} [{lo:.2f}, {hi:.2f}]"
+
+
+if __name__ == "__main__":
+    main()
