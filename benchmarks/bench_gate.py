@@ -21,12 +21,10 @@ was nearest to its site).
 
 from __future__ import annotations
 
-import argparse
-from pathlib import Path
-
 import numpy as np
 from numpy.typing import NDArray
 
+from bench_off_line import stored_cut_parser
 from vlocbench.bench.experiment import load_experiment
 from vlocbench.bench.metrics import WRONG_THRESHOLD
 from vlocbench.bench.store import read_episode_table, read_episodes
@@ -73,12 +71,7 @@ def gate_distances(
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--experiment", type=Path, required=True)
-    ap.add_argument("--town", required=True)
-    ap.add_argument("--method", required=True)
-    ap.add_argument("--setup", required=True, help="labels of the sweep, e.g. k=8,k=10")
-    ap.add_argument("--store", type=Path, help="default: the experiment's output")
+    ap = stored_cut_parser("labels of the sweep, e.g. k=8,k=10")
     ap.add_argument("--floors", default="50,100", help="inlier floors to try, e.g. 50,100")
     ap.add_argument("--window-s", type=float, default=5.0, help="how long before a failure")
     args = ap.parse_args()

@@ -60,14 +60,19 @@ def against_line(
     return nearest, across, dyaw, right
 
 
-def main() -> None:
+def stored_cut_parser(setup_help: str) -> argparse.ArgumentParser:
+    """Arguments naming a cut of an experiment's stored episodes: one town, one method, setups."""
     ap = argparse.ArgumentParser()
     ap.add_argument("--experiment", type=Path, required=True)
     ap.add_argument("--town", required=True)
     ap.add_argument("--method", required=True)
-    ap.add_argument("--setup", required=True, help="a label of the sweep, e.g. k=10")
+    ap.add_argument("--setup", required=True, help=setup_help)
     ap.add_argument("--store", type=Path, help="default: the experiment's output")
-    args = ap.parse_args()
+    return ap
+
+
+def main() -> None:
+    args = stored_cut_parser("a label of the sweep, e.g. k=10").parse_args()
     plan = load_experiment(args.experiment).only([args.town], [args.method], setups=[args.setup])
     store = args.store or plan.output_dir
     stored = {r.key for r in read_episodes(store) if r.metrics is not None}
