@@ -25,8 +25,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from bench_off_line import stored_cut_parser
+from vlocbench.bench.consistency import COV_COLUMNS, nees, upper_to_full
 from vlocbench.bench.experiment import load_experiment
-from vlocbench.bench.metrics import WRONG_THRESHOLD
+from vlocbench.bench.metrics import wrong_answers
 from vlocbench.bench.store import read_episode_table, read_episodes
 from vlocbench.geometry import wrap_angle
 
@@ -49,23 +50,13 @@ def gate_distances(
         [answers["x_m"] - rear_m * np.cos(yaw_a), answers["y_m"] - rear_m * np.sin(yaw_a)]
     )
     r = np.stack([*(rear_a - rear_e), wrap_angle(yaw_a - yaw_e)], axis=1)  # (N, 3)
-    cov = np.empty((len(i), 3, 3))
-    for (a, b), name in {
-        (0, 0): "xx_m2",
-        (0, 1): "xy_m2",
-        (0, 2): "xyaw_mrad",
-        (1, 1): "yy_m2",
-        (1, 2): "yyaw_mrad",
-        (2, 2): "yawyaw_rad2",
-    }.items():
-        cov[:, a, b] = cov[:, b, a] = trajectory[f"ekf_cov_{name}"][i]
+    cov = upper_to_full(np.column_stack([trajectory[c][i] for c in COV_COLUMNS]))
     # the stored covariance is the vehicle pose's: J P_rear J' with J = d(vehicle)/d(rear)
     jac_inv = np.zeros((len(i), 3, 3))
     jac_inv[:, 0, 0] = jac_inv[:, 1, 1] = jac_inv[:, 2, 2] = 1.0
     jac_inv[:, 0, 2], jac_inv[:, 1, 2] = rear_m * s, -rear_m * c
     p_rear = jac_inv @ cov @ jac_inv.transpose(0, 2, 1)
-    innovation_s = np.linalg.inv(p_rear + pose_cov)
-    d = np.sqrt(np.maximum(np.einsum("ni,nij,nj->n", r, innovation_s, r), 0.0))
+    d = np.sqrt(nees(r, p_rear + pose_cov))  # r' S^-1 r, as the filter's gate computes it
     sigma = np.sqrt(p_rear[:, 0, 0] + p_rear[:, 1, 1])
     return d, np.hypot(r[:, 0], r[:, 1]), sigma
 
@@ -105,9 +96,7 @@ def main() -> None:
                 0.5 * task.episode.vehicle.wheelbase_m,  # the filter's rear axle, as the episode's
                 task.episode.ekf.pose_covariance(),
             )
-            right = (answers["position_error_3d_m"] <= WRONG_THRESHOLD[0]) & (
-                answers["rotation_error_deg"] <= WRONG_THRESHOLD[1]
-            )
+            right = ~wrong_answers(answers["position_error_3d_m"], answers["rotation_error_deg"])
             arrived_s = (answers["time_s"] + answers["latency_s"])[
                 ~right & answers["fused"].astype(bool)
             ]
