@@ -16,7 +16,11 @@ percentiles in brackets); the innovation the gate admits at the fused answers' m
 covariance (a purely positional one: gate x sqrt((var x + var y) / 2 + pose variance)); and what
 a floor on the PnP inliers (``--floors``) would have kept out of the filter; and how many of the
 drives' failures came within ``--window-s`` of a wrong answer fused (a failure's time: when the car
-was nearest to its site).
+was nearest to its site). The other failures are taken apart too: the longest stretch in that
+window with no answer fused (the filter on odometry alone), how many queries went unanswered there
+and how many of those a localizer's ``min_inliers`` turned away, and the filter's heading error
+where that stretch began and a second before the failure (before a collision turns the car),
+beside its heading error over every step of the drives.
 """
 
 from __future__ import annotations
@@ -84,12 +88,16 @@ def main() -> None:
             raise SystemExit(f"{setup.label}: the filter has no Mahalanobis gate")
         pose_cov = drives[0].episode.ekf.pose_covariance()
         columns: dict[str, list[NDArray]] = {}
-        failures = followed = 0
+        after_wrong = 0
+        others: list[tuple[float, int, int, float, float]] = []
+        headings: list[NDArray] = []
         for task in drives:
             answers = read_episode_table(store, task.key, "localizations")
             answered = answers["success"].astype(bool)
+            unanswered = {k: np.asarray(v)[~answered] for k, v in answers.items()}
             answers = {k: np.asarray(v)[answered] for k, v in answers.items()}
             trajectory = read_episode_table(store, task.key, "trajectory")
+            headings.append(heading_error_deg(trajectory))
             d, innovation, sigma = gate_distances(
                 answers,
                 trajectory,
@@ -97,15 +105,19 @@ def main() -> None:
                 task.episode.ekf.pose_covariance(),
             )
             right = ~wrong_answers(answers["position_error_3d_m"], answers["rotation_error_deg"])
-            arrived_s = (answers["time_s"] + answers["latency_s"])[
+            fused_s = (answers["time_s"] + answers["latency_s"])[answers["fused"].astype(bool)]
+            wrong_fused_s = (answers["time_s"] + answers["latency_s"])[
                 ~right & answers["fused"].astype(bool)
             ]
             for x, y in metrics[task.key].failure_sites_xy:
                 # the failure's time: where the car truly was nearest to the failure's site
                 at = np.hypot(trajectory["true_x_m"] - x, trajectory["true_y_m"] - y).argmin()
                 t_s = trajectory["time_s"][at]
-                failures += 1
-                followed += bool(((arrived_s <= t_s) & (arrived_s > t_s - args.window_s)).any())
+                window = (t_s - args.window_s, t_s)
+                if in_window(wrong_fused_s, window).any():
+                    after_wrong += 1
+                    continue
+                others.append(failure_context(fused_s, unanswered, trajectory, window))
             for name, v in (
                 ("d", d),
                 ("innovation", innovation),
@@ -135,8 +147,17 @@ def main() -> None:
             print(f"  {name}: {int(where.sum())} | " + " | ".join(cells))
         print(
             f"  failures with a wrong answer fused in the {args.window_s:g} s before: "
-            f"{followed} of {failures}"
+            f"{after_wrong} of {after_wrong + len(others)}"
         )
+        if others:
+            gap, missed, floored, heading_from, heading = (np.array(v, float) for v in zip(*others))
+            print(
+                f"  the other {len(others)}: the longest stretch with no answer fused "
+                f"{stat(gap)} s, queries unanswered there {int(missed.sum())} "
+                f"({int(floored.sum())} under a min_inliers); the filter's heading error where "
+                f"it began {stat(heading_from)} deg, a second before the failure {stat(heading)}"
+            )
+        print(f"  the filter's heading error over every step: {stat(np.concatenate(headings))} deg")
         fused = a["fused"]
         if fused.any():
             var = np.median(a["sigma"][fused]) ** 2 / 2 + pose_cov[0, 0]
@@ -150,6 +171,43 @@ def main() -> None:
                 f"{int((under & fused & ~a['right']).sum())} of the wrong answers fused and "
                 f"{int((under & fused & a['right']).sum())} of the right ones"
             )
+
+
+def in_window(times_s: NDArray, window: tuple[float, float]) -> NDArray[np.bool_]:
+    """Which of ``times_s`` lie in (start, end]."""
+    return (times_s > window[0]) & (times_s <= window[1])
+
+
+def failure_context(
+    fused_s: NDArray,
+    unanswered: dict[str, NDArray],
+    trajectory: dict[str, NDArray],
+    window: tuple[float, float],
+) -> tuple[float, int, int, float, float]:
+    """Before a failure at ``window``'s end: the longest stretch of the window with no answer
+    fused (s; ``fused_s``: when each fused answer arrived), the queries unanswered in that stretch
+    and how many of them a ``min_inliers`` turned away (their reason says so), and the filter's
+    heading error (deg) where the stretch began and a second before the failure."""
+    edges = np.concatenate([[window[0]], np.sort(fused_s[in_window(fused_s, window)]), [window[1]]])
+    longest = int(np.diff(edges).argmax())
+    stretch = (edges[longest], edges[longest + 1])
+    missed = in_window(unanswered["time_s"] + unanswered["latency_s"], stretch)
+    floored = sum("inliers (<" in str(r) for r in unanswered["reason"][missed])
+    t = trajectory["time_s"]
+    heading_deg = heading_error_deg(trajectory)
+    at = [max(int(np.searchsorted(t, s)) - 1, 0) for s in (stretch[0], window[1] - 1.0)]
+    return (
+        float(np.diff(stretch)[0]),
+        int(missed.sum()),
+        floored,
+        float(heading_deg[at[0]]),
+        float(heading_deg[at[1]]),
+    )
+
+
+def heading_error_deg(trajectory: dict[str, NDArray]) -> NDArray[np.float64]:
+    """(N,) the filter's heading error at every step of a stored trajectory (deg)."""
+    return np.degrees(np.abs(wrap_angle(trajectory["ekf_yaw_rad"] - trajectory["true_yaw_rad"])))
 
 
 def stat(v: NDArray[np.float64]) -> str:

@@ -13,11 +13,18 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
+from numpy.typing import NDArray
+
 from vlocbench.bench.localizer import LocalizationQuery, PoseEstimate
 from vlocbench.geometry import invert_pose
 from vlocbench.loc.gallery import CameraModel
-from vlocbench.loc.localizer import LocalizerConfig, MapLocalizer
-from vlocbench.sim import Camera
+from vlocbench.loc.localizer import LocalizerConfig, MapLocalizer, RigResult
+from vlocbench.sim import Camera, Frame
+
+# of a (6, 6) pose covariance over (position x, y, z; rotation vector): x, y and the rotation about
+# the world's z, the yaw near level
+PLANAR = [0, 1, 5]
 
 if TYPE_CHECKING:
     from vlocbench.bench.methods import MethodContext
@@ -87,7 +94,7 @@ class VisualLocalizer:
         return PoseEstimate(
             True,
             result.world_from_rig,
-            None,
+            self._covariance(result, query.frames),
             elapsed,
             result.reason,
             inliers=result.num_inliers,
@@ -95,6 +102,19 @@ class VisualLocalizer:
             fallback=not result.generalized and result.cameras[result.camera].fallback,
             **attempt,
         )
+
+    def _covariance(self, result: RigResult, frames: Sequence[Frame]) -> NDArray[np.float64] | None:
+        """(3, 3) over the vehicle's (x, y, yaw) with ``localizer.covariance: estimate``: the PnP's
+        of the camera whose pose answered, through its mounting; None (the filter's default) when
+        fixed, and for a generalized rig pose, whose PnP gives none."""
+        config = self.localizer.config
+        if config.covariance == "fixed" or result.generalized:
+            return None
+        mount = frames[result.camera].camera.extrinsics.vehicle_from_cam()
+        full = result.cameras[result.camera].covariance_of(
+            invert_pose(mount), config.pixel_noise_px
+        )
+        return None if full is None else full[np.ix_(PLANAR, PLANAR)]
 
 
 def map_localizer(context: MethodContext, config: LocalizerConfig) -> VisualLocalizer:

@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 
 from vlocbench.config import ADDED_OPTION, require
 from vlocbench.errors import LocalizationError, UnknownNameError
-from vlocbench.geometry import invert_pose, skew
+from vlocbench.geometry import covariance_through_offset, invert_pose, skew
 from vlocbench.loc.features import Features, check_image, extract_timed
 from vlocbench.loc.gallery import CameraModel
 from vlocbench.loc.mapping import FeatureStore, colmap_camera, map_info, pose_of, rigid_of
@@ -36,6 +36,9 @@ MIN_PNP_POINTS = 4  # P3P's minimal sample and one point to choose among its sol
 
 
 RETRIEVAL_SOURCES = ("map", "pose-prior")  # LocalizerConfig.retrieval
+# LocalizerConfig.covariance: "fixed", none of the answer's own (the filter's default, the paper's
+# 0.1); "estimate", the PnP refinement's for ``pixel_noise_px`` of image noise
+COVARIANCES = ("fixed", "estimate")
 
 
 @dataclass(frozen=True)
@@ -55,6 +58,9 @@ class LocalizerConfig:
     # "map": the map's own retrieval; "pose-prior": the map images nearest the prior pose instead
     # (sequential localization with any map; with the true pose as prior, the local features alone)
     retrieval: str = field(default="map", metadata=ADDED_OPTION)
+    # what covariance an answer carries (COVARIANCES); "estimate" assumes this much image noise
+    covariance: str = field(default="fixed", metadata=ADDED_OPTION)
+    pixel_noise_px: float = field(default=1.0, metadata=ADDED_OPTION)
 
     def __post_init__(self) -> None:
         require(self.top_k >= 1, "localizer.top_k", "must be >= 1")
@@ -67,6 +73,9 @@ class LocalizerConfig:
         require(self.confident_inliers >= 0, "localizer.confident_inliers", "must be >= 0")
         if self.retrieval not in RETRIEVAL_SOURCES:
             raise UnknownNameError("localizer.retrieval", self.retrieval, RETRIEVAL_SOURCES)
+        if self.covariance not in COVARIANCES:
+            raise UnknownNameError("localizer.covariance", self.covariance, COVARIANCES)
+        require(self.pixel_noise_px > 0, "localizer.pixel_noise_px", "must be > 0")
 
     @property
     def min_points(self) -> int:
@@ -125,6 +134,18 @@ class QueryResult:
     # of ``seconds``, those another localizer spent for this one (features extracted once for
     # localizers that share a drive and an extractor: features.shared_extraction)
     shared_s: float = 0.0
+
+    def covariance_of(
+        self, cam_from_body: NDArray[np.float64], pixel_noise_px: float
+    ) -> NDArray[np.float64] | None:
+        """(6, 6) covariance of ``world_from_cam @ cam_from_body`` (a body the camera is mounted
+        on, (4, 4) ``cam_from_body``) for ``pixel_noise_px`` of image noise, in the convention of
+        ``world_from_cam_covariance``; None where the PnP gave none."""
+        if self.world_from_cam is None or self.world_from_cam_covariance is None:
+            return None
+        return pixel_noise_px**2 * covariance_through_offset(
+            self.world_from_cam_covariance, self.world_from_cam, cam_from_body
+        )
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -41,9 +41,9 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from vlocbench.config import require_one_of
 from vlocbench.errors import VlocbenchError
-from vlocbench.geometry import covariance_through_offset, invert_pose
+from vlocbench.geometry import invert_pose
 from vlocbench.loc.gallery import CameraModel, Gallery
-from vlocbench.loc.localizer import LocalizerConfig, MapLocalizer, QueryResult
+from vlocbench.loc.localizer import COVARIANCES, LocalizerConfig, MapLocalizer, QueryResult
 from vlocbench.loc.mapping import MAP_FILE
 from vlocbench.loc.registry import method_conf
 from vlocbench.ros.messages import (
@@ -81,7 +81,6 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
     "pixel_noise_px": (1.0, "image noise the PnP's covariance assumes (covariance: estimate)"),
     "pose_variance": (0.1, "diagonal of the covariance when fixed (the paper's 0.1)"),
 }
-COVARIANCES = ("estimate", "fixed")
 
 
 class LocalizationNode(Node):
@@ -179,12 +178,13 @@ class LocalizationNode(Node):
                 else np.eye(4)
             )
             world_from_base = world_from_base @ sensor_from_base
-            if self.params["covariance"] == "fixed" or result.world_from_cam_covariance is None:
+            covariance = (
+                result.covariance_of(sensor_from_base, float(self.params["pixel_noise_px"]))
+                if self.params["covariance"] == "estimate"
+                else None
+            )
+            if covariance is None:
                 covariance = np.eye(6) * float(self.params["pose_variance"])
-            else:
-                covariance = float(self.params["pixel_noise_px"]) ** 2 * covariance_through_offset(
-                    result.world_from_cam_covariance, result.world_from_cam, sensor_from_base
-                )
             self.pose_pub.publish(
                 pose_with_covariance(world_from_base, covariance, msg.header.stamp)
             )
