@@ -8,19 +8,20 @@ rendering. Each answer is right within (5 m, 10 deg), 6-DoF (the confident-wrong
 gate is reconstructed from the stored trajectory: the filter's rear-axle pose and covariance at
 the last step before the answer arrived (the query's time plus its latency), the answer moved to
 the rear axle as the episode does, and the Mahalanobis distance of the innovation with the
-episode's pose covariance; the share of answers where ``distance < gate`` agrees with the stored
-``fused`` says how exact that is. Prints, per setup, for the right answers fused, the wrong ones
-fused and the wrong ones rejected: how many, and medians of the innovation (m), of the filter's
-position sigma (m, sqrt(var x + var y)), of the distance, and of the PnP inliers (10th and 90th
-percentiles in brackets); the innovation the gate admits at the fused answers' median filter
-covariance (a purely positional one: gate x sqrt((var x + var y) / 2 + pose variance)); and what
-a floor on the PnP inliers (``--floors``) would have kept out of the filter; and how many of the
-drives' failures came within ``--window-s`` of a wrong answer fused (a failure's time: when the car
-was nearest to its site). The other failures are taken apart too: the longest stretch in that
-window with no answer fused (the filter on odometry alone), how many queries went unanswered there
-and how many of those a localizer's ``min_inliers`` turned away, and the filter's heading error
-where that stretch began and a second before the failure (before a collision turns the car),
-beside its heading error over every step of the drives.
+answer's covariance (its own, or the episode's pose covariance); the share of answers where
+``distance < gate`` agrees with the stored ``fused`` says how exact that is. Prints, per setup,
+for the right answers fused, the wrong ones fused and the wrong ones rejected: how many, and
+medians of the innovation (m), of the filter's position sigma (m, sqrt(var x + var y)), of the
+distance, and of the PnP inliers (10th and 90th percentiles in brackets); the innovation the gate
+admits at the fused answers' median covariances (purely positional ones: gate x sqrt((var x + var
+y) / 2 + the answer's var x)); what a floor on the PnP inliers (``--floors``) would have kept
+out of the filter; and how many of the drives' failures came within ``--window-s`` of a wrong
+answer fused (a failure's time: when the car was nearest to its site). The other failures are
+taken apart too: the longest stretch in that window with no answer fused (the filter on odometry
+alone), how many queries went unanswered there and how many of those a localizer's
+``min_inliers`` turned away, and the filter's heading error where that stretch began and a second
+before the failure (before a collision turns the car), beside its heading error over every step
+of the drives.
 """
 
 from __future__ import annotations
@@ -36,12 +37,21 @@ from vlocbench.bench.store import read_episode_table, read_episodes
 from vlocbench.geometry import wrap_angle
 
 
+def answer_covariances(answers: dict[str, NDArray], default: NDArray) -> NDArray[np.float64]:
+    """(N, 3, 3) each answer's covariance as the filter took it: its own where it carries one
+    (``localizer: {covariance: estimate}``), else the filter's ``default`` (3, 3)."""
+    return np.array(
+        [np.reshape(c, (3, 3)) if len(c) == 9 else default for c in answers["covariance"]]
+    )
+
+
 def gate_distances(
     answers: dict[str, NDArray], trajectory: dict[str, NDArray], rear_m: float, pose_cov: NDArray
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """Per answer (N,): the Mahalanobis distance of its innovation against the filter before it
     arrived, the innovation's length (m) and the filter's position sigma (m). ``trajectory``'s
-    pose and covariance are the vehicle's (the rear axle's moved forward by ``rear_m``)."""
+    pose and covariance are the vehicle's (the rear axle's moved forward by ``rear_m``);
+    ``pose_cov`` (N, 3, 3): the answers' covariances."""
     t = trajectory["time_s"]
     i = np.clip(np.searchsorted(t, answers["time_s"] + answers["latency_s"]) - 1, 0, len(t) - 1)
     yaw_e = trajectory["ekf_yaw_rad"][i]
@@ -86,7 +96,6 @@ def main() -> None:
         gate = drives[0].episode.ekf.mahalanobis_gate
         if gate is None:
             raise SystemExit(f"{setup.label}: the filter has no Mahalanobis gate")
-        pose_cov = drives[0].episode.ekf.pose_covariance()
         columns: dict[str, list[NDArray]] = {}
         after_wrong = 0
         others: list[tuple[float, int, int, float, float]] = []
@@ -98,11 +107,12 @@ def main() -> None:
             answers = {k: np.asarray(v)[answered] for k, v in answers.items()}
             trajectory = read_episode_table(store, task.key, "trajectory")
             headings.append(heading_error_deg(trajectory))
+            pose_cov = answer_covariances(answers, task.episode.ekf.pose_covariance())
             d, innovation, sigma = gate_distances(
                 answers,
                 trajectory,
                 0.5 * task.episode.vehicle.wheelbase_m,  # the filter's rear axle, as the episode's
-                task.episode.ekf.pose_covariance(),
+                pose_cov,
             )
             right = ~wrong_answers(answers["position_error_3d_m"], answers["rotation_error_deg"])
             fused_s = (answers["time_s"] + answers["latency_s"])[answers["fused"].astype(bool)]
@@ -122,6 +132,7 @@ def main() -> None:
                 ("d", d),
                 ("innovation", innovation),
                 ("sigma", sigma),
+                ("answer_var", pose_cov[:, 0, 0]),
                 ("inliers", answers["inliers"].astype(float)),
                 ("fused", answers["fused"].astype(bool)),
                 ("right", right),
@@ -160,7 +171,7 @@ def main() -> None:
         print(f"  the filter's heading error over every step: {stat(np.concatenate(headings))} deg")
         fused = a["fused"]
         if fused.any():
-            var = np.median(a["sigma"][fused]) ** 2 / 2 + pose_cov[0, 0]
+            var = np.median(a["sigma"][fused]) ** 2 / 2 + np.median(a["answer_var"][fused])
             print(
                 f"  admitted at the fused answers' median covariance: {gate * np.sqrt(var):.1f} m"
             )
