@@ -108,6 +108,11 @@ def skew(v: Array) -> Array:
     return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
 
+# of a (6, 6) pose covariance over (position x, y, z; rotation x, y, z): the rows and columns of
+# the planar pose (x, y, yaw), the rotation about z being the yaw near level
+PLANAR_OF_POSE = [0, 1, 5]
+
+
 def covariance_through_offset(
     world_from_a_covariance: Array, world_from_a: Array, a_from_b: Array
 ) -> Array:

@@ -17,14 +17,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vlocbench.bench.localizer import LocalizationQuery, PoseEstimate
-from vlocbench.geometry import invert_pose
+from vlocbench.geometry import PLANAR_OF_POSE, invert_pose
 from vlocbench.loc.gallery import CameraModel
 from vlocbench.loc.localizer import LocalizerConfig, MapLocalizer, RigResult
 from vlocbench.sim import Camera, Frame
-
-# of a (6, 6) pose covariance over (position x, y, z; rotation vector): x, y and the rotation about
-# the world's z, the yaw near level
-PLANAR = [0, 1, 5]
 
 if TYPE_CHECKING:
     from vlocbench.bench.methods import MethodContext
@@ -114,7 +110,7 @@ class VisualLocalizer:
         full = result.cameras[result.camera].covariance_of(
             invert_pose(mount), config.pixel_noise_px
         )
-        return None if full is None else full[np.ix_(PLANAR, PLANAR)]
+        return None if full is None else full[np.ix_(PLANAR_OF_POSE, PLANAR_OF_POSE)]
 
 
 def map_localizer(context: MethodContext, config: LocalizerConfig) -> VisualLocalizer:

@@ -31,7 +31,7 @@ from vlocbench.bench.runs import Experiment, stored_rows
 from vlocbench.bench.store import EpisodeRow, read_episode_table
 from vlocbench.bench.visual import camera_model
 from vlocbench.config import from_dict
-from vlocbench.geometry import quaternion_from_rotation
+from vlocbench.geometry import PLANAR_OF_POSE, quaternion_from_rotation
 from vlocbench.interfaces import Array
 from vlocbench.nav import EkfConfig, OdometryNoise
 from vlocbench.ros.messages import sec_nanosec
@@ -81,7 +81,7 @@ def _pose_stamped(t_s: float, pose: Any, covariance: Array) -> Any:
 def _pose_covariance(planar: Array) -> Array:
     """(6, 6) over x, y, z, roll, pitch, yaw from the (3, 3) over x, y, yaw; z, roll, pitch 0."""
     covariance = np.zeros((6, 6))
-    covariance[np.ix_([0, 1, 5], [0, 1, 5])] = planar
+    covariance[np.ix_(PLANAR_OF_POSE, PLANAR_OF_POSE)] = planar
     return covariance
 
 
