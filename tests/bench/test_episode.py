@@ -174,6 +174,19 @@ def test_an_answers_own_covariance_is_recorded_with_it(sim, path):
     assert all(r.covariance == () for r in default)  # the EKF used its own default
 
 
+def test_the_oracle_answers_with_its_noise_or_the_filters_fixed_covariance(sim, path):
+    config = EpisodeConfig(mode="ground_truth")
+    noisy = OracleConfig(position_sigma_m=0.5, yaw_sigma_deg=2)
+    own = run_episode(sim, path, OracleLocalizer(noisy), config).localizations
+    expected = np.diag([0.25, 0.25, np.radians(2) ** 2]).ravel()
+    assert own and all(np.allclose(r.covariance, expected) for r in own)
+    fixed = OracleLocalizer(dataclasses.replace(noisy, covariance="fixed"))
+    answers = run_episode(sim, path, fixed, config).localizations
+    assert all(r.covariance == () for r in answers)  # the filter's default, the paper's 0.1
+    # the same seeded noise either way: only what the filter is told of it differs
+    assert [r.x_m for r in answers] == pytest.approx([r.x_m for r in own])
+
+
 def test_episodes_are_deterministic(sim, path):
     config = EpisodeConfig(seed=5, odometry=OdometryNoise(0.04, 0.1, 0.3))
     oracle = OracleLocalizer(
@@ -198,6 +211,8 @@ def test_bad_episode_config():
         EpisodeConfig(localization_rate_hz=0)
     with pytest.raises(ConfigError, match=r"oracle\.failure_probability"):
         OracleConfig(failure_probability=1.5)
+    with pytest.raises(UnknownNameError, match=r"oracle\.covariance.*estimate"):
+        OracleConfig(covariance="honest")
     with pytest.raises(UnknownNameError, match="valid: ground_truth, navigate"):
         from_dict(EpisodeConfig, {"mode": "fly"})
     with pytest.raises(UnknownNameError, match="seed"):

@@ -13,8 +13,10 @@ from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 import numpy as np
 
 from vlocbench.config import require
+from vlocbench.errors import UnknownNameError
 from vlocbench.geometry import planar_pose
 from vlocbench.interfaces import Array
+from vlocbench.loc.localizer import COVARIANCES
 from vlocbench.sim import Camera, Frame
 
 if TYPE_CHECKING:
@@ -111,6 +113,9 @@ class OracleConfig:
     position_sigma_m: float = 0.0
     yaw_sigma_deg: float = 0.0
     failure_probability: float = 0.0
+    # "estimate": each answer carries its noise's covariance (at least 1e-4 a term); "fixed": none,
+    # so the filter takes its default, as it does the paper's localizer's (0.1 on x, y and yaw)
+    covariance: str = "estimate"
 
     def __post_init__(self) -> None:
         require(self.position_sigma_m >= 0, "oracle.position_sigma_m", "must be >= 0")
@@ -118,6 +123,8 @@ class OracleConfig:
         require(
             0 <= self.failure_probability <= 1, "oracle.failure_probability", "must be in [0, 1]"
         )
+        if self.covariance not in COVARIANCES:
+            raise UnknownNameError("oracle.covariance", self.covariance, COVARIANCES)
 
 
 class OracleLocalizer:
@@ -156,6 +163,8 @@ class OracleLocalizer:
             y + c.position_sigma_m * noise[1],
             yaw + np.radians(c.yaw_sigma_deg) * noise[2],
         )
+        if c.covariance == "fixed":
+            return PoseEstimate(True, pose)
         var = np.array([c.position_sigma_m**2] * 2 + [np.radians(c.yaw_sigma_deg) ** 2])
         return PoseEstimate(True, pose, np.diag(np.maximum(var, 1e-4)))
 
