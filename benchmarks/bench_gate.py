@@ -1,7 +1,7 @@
 """Which wrong answers the EKF's gate lets through, and why: a store's failure drives taken apart.
 
     python benchmarks/bench_gate.py --experiment experiments/paper/illumination.yaml
-                                    --town town10 --method xfeat-lighterglue --setup k=8,k=10
+                                    --town town10 --method xfeat-lighterglue --setup k=8 --setup k=10
 
 Reads the stored failure drives of one town and method at each setup (the present plan's keys), no
 rendering. Each answer is right within (5 m, 10 deg), 6-DoF (the confident-wrong threshold). Its
@@ -76,12 +76,11 @@ def gate_distances(
 
 
 def main() -> None:
-    ap = stored_cut_parser("labels of the sweep, e.g. k=8,k=10")
+    ap = stored_cut_parser("a label of the sweep, e.g. k=8; again for more", many=True)
     ap.add_argument("--floors", default="50,100", help="inlier floors to try, e.g. 50,100")
     ap.add_argument("--window-s", type=float, default=5.0, help="how long before a failure")
     args = ap.parse_args()
-    labels = args.setup.split(",")
-    plan = load_experiment(args.experiment).only([args.town], [args.method], setups=labels)
+    plan = load_experiment(args.experiment).only([args.town], [args.method], setups=args.setup)
     store = args.store or plan.output_dir
     metrics = {r.key: r.metrics for r in read_episodes(store) if r.metrics is not None}
     for setup in plan.setups:

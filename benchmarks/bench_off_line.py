@@ -60,13 +60,14 @@ def against_line(
     return nearest, across, dyaw, right
 
 
-def stored_cut_parser(setup_help: str) -> argparse.ArgumentParser:
-    """Arguments naming a cut of an experiment's stored episodes: one town, one method, setups."""
+def stored_cut_parser(setup_help: str, many: bool = False) -> argparse.ArgumentParser:
+    """Arguments naming a cut of an experiment's stored episodes: one town, one method, a setup
+    (``many``: one or more, ``--setup`` repeated as ``vlocbench run`` takes it)."""
     ap = argparse.ArgumentParser()
     ap.add_argument("--experiment", type=Path, required=True)
     ap.add_argument("--town", required=True)
     ap.add_argument("--method", required=True)
-    ap.add_argument("--setup", required=True, help=setup_help)
+    ap.add_argument("--setup", required=True, help=setup_help, action="append" if many else None)
     ap.add_argument("--store", type=Path, help="default: the experiment's output")
     return ap
 
