@@ -37,7 +37,9 @@ def test_method_fields_sweep_as_setups_and_bad_ones_are_named():
     base = {"name": "r", "towns": ["town10"], "methods": [{"name": "oracle", "kind": "oracle"}]}
     with pytest.raises(UnknownNameError, match="method 'oracl'; valid: oracle"):
         load_experiment({**base, "sweep": {"methods.oracl.args.position_sigma_m": [1, 2]}})
-    with pytest.raises(ConfigError, match=r"sweep.methods.oracle: .*'position_sigm'; valid: fail"):
+    with pytest.raises(
+        ConfigError, match=r"sweep.methods.oracle: .*'position_sigm'; valid: covariance, fail"
+    ):
         load_experiment({**base, "sweep": {"methods.oracle.args.position_sigm": [1, 2]}})
     with pytest.raises(
         ConfigError, match=r"sweep.methods.oracle: .*position_sigma_m: must be >= 0"
