@@ -105,7 +105,8 @@ def main() -> None:
             unanswered = {k: np.asarray(v)[~answered] for k, v in answers.items()}
             answers = {k: np.asarray(v)[answered] for k, v in answers.items()}
             trajectory = read_episode_table(store, task.key, "trajectory")
-            headings.append(heading_error_deg(trajectory))
+            heading_deg = heading_error_deg(trajectory)
+            headings.append(heading_deg)
             pose_cov = answer_covariances(answers, task.episode.ekf.pose_covariance())
             d, innovation, sigma = gate_distances(
                 answers,
@@ -114,10 +115,9 @@ def main() -> None:
                 pose_cov,
             )
             right = ~wrong_answers(answers["position_error_3d_m"], answers["rotation_error_deg"])
-            fused_s = (answers["time_s"] + answers["latency_s"])[answers["fused"].astype(bool)]
-            wrong_fused_s = (answers["time_s"] + answers["latency_s"])[
-                ~right & answers["fused"].astype(bool)
-            ]
+            arrived_s = answers["time_s"] + answers["latency_s"]
+            fused = answers["fused"].astype(bool)
+            fused_s, wrong_fused_s = arrived_s[fused], arrived_s[fused & ~right]
             for x, y in metrics[task.key].failure_sites_xy:
                 # the failure's time: where the car truly was nearest to the failure's site
                 at = np.hypot(trajectory["true_x_m"] - x, trajectory["true_y_m"] - y).argmin()
@@ -126,14 +126,16 @@ def main() -> None:
                 if in_window(wrong_fused_s, window).any():
                     after_wrong += 1
                     continue
-                others.append(failure_context(fused_s, unanswered, trajectory, window))
+                others.append(
+                    failure_context(fused_s, unanswered, trajectory["time_s"], heading_deg, window)
+                )
             for name, v in (
                 ("d", d),
                 ("innovation", innovation),
                 ("sigma", sigma),
                 ("answer_var", pose_cov[:, 0, 0]),
                 ("inliers", answers["inliers"].astype(float)),
-                ("fused", answers["fused"].astype(bool)),
+                ("fused", fused),
                 ("right", right),
             ):
                 columns.setdefault(name, []).append(v)
@@ -191,21 +193,21 @@ def in_window(times_s: NDArray, window: tuple[float, float]) -> NDArray[np.bool_
 def failure_context(
     fused_s: NDArray,
     unanswered: dict[str, NDArray],
-    trajectory: dict[str, NDArray],
+    time_s: NDArray,
+    heading_deg: NDArray,
     window: tuple[float, float],
 ) -> tuple[float, int, int, float, float]:
     """Before a failure at ``window``'s end: the longest stretch of the window with no answer
     fused (s; ``fused_s``: when each fused answer arrived), the queries unanswered in that stretch
     and how many of them a ``min_inliers`` turned away (their reason says so), and the filter's
-    heading error (deg) where the stretch began and a second before the failure."""
+    heading error (deg; ``heading_deg`` at each step of ``time_s``) where the stretch began and a
+    second before the failure."""
     edges = np.concatenate([[window[0]], np.sort(fused_s[in_window(fused_s, window)]), [window[1]]])
     longest = int(np.diff(edges).argmax())
     stretch = (edges[longest], edges[longest + 1])
     missed = in_window(unanswered["time_s"] + unanswered["latency_s"], stretch)
     floored = sum("inliers (<" in str(r) for r in unanswered["reason"][missed])
-    t = trajectory["time_s"]
-    heading_deg = heading_error_deg(trajectory)
-    at = [max(int(np.searchsorted(t, s)) - 1, 0) for s in (stretch[0], window[1] - 1.0)]
+    at = [max(int(np.searchsorted(time_s, s)) - 1, 0) for s in (stretch[0], window[1] - 1.0)]
     return (
         float(np.diff(stretch)[0]),
         int(missed.sum()),
