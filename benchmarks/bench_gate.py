@@ -30,19 +30,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from bench_off_line import stored_cut_parser
-from vlocbench.bench.consistency import COV_COLUMNS, nees, upper_to_full
+from vlocbench.bench.consistency import COV_COLUMNS, nees, stored_covariances, upper_to_full
 from vlocbench.bench.experiment import load_experiment
 from vlocbench.bench.metrics import wrong_answers
 from vlocbench.bench.store import read_episode_table, read_episodes
 from vlocbench.geometry import wrap_angle
-
-
-def answer_covariances(answers: dict[str, NDArray], default: NDArray) -> NDArray[np.float64]:
-    """(N, 3, 3) each answer's covariance as the filter took it: its own where it carries one
-    (``localizer: {covariance: estimate}``), else the filter's ``default`` (3, 3)."""
-    return np.array(
-        [np.reshape(c, (3, 3)) if len(c) == 9 else default for c in answers["covariance"]]
-    )
 
 
 def gate_distances(
@@ -107,7 +99,7 @@ def main() -> None:
             trajectory = read_episode_table(store, task.key, "trajectory")
             heading_deg = heading_error_deg(trajectory)
             headings.append(heading_deg)
-            pose_cov = answer_covariances(answers, task.episode.ekf.pose_covariance())
+            pose_cov = stored_covariances(answers["covariance"], task.episode.ekf.pose_covariance())
             d, innovation, sigma = gate_distances(
                 answers,
                 trajectory,

@@ -19,7 +19,7 @@ recorded read as NaN.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -114,6 +114,14 @@ def ekf_nees(trajectory: Mapping[str, Array]) -> Array:
     return nees(errors, upper_to_full(upper))
 
 
+def stored_covariances(column: Sequence[Sequence[float]], default: Array) -> Array:
+    """(N, 3, 3) a localization table's ``covariance`` column (N,), each answer's own row-major
+    (x, y, yaw) covariance where it carries one, else ``default`` (3, 3)."""
+    return np.array([np.reshape(c, (3, 3)) if len(c) == 9 else default for c in column]).reshape(
+        -1, 3, 3
+    )
+
+
 def _answers(locs: Mapping[str, Any]) -> tuple[Array, Array, Array]:
     """The answered queries: (K, 3) errors of the answer, their (K, 3, 3) own covariances (NaN
     where an answer has none), and whether each is right within (5 m, 10 deg) on 6-DoF errors."""
@@ -130,13 +138,11 @@ def _answers(locs: Mapping[str, Any]) -> tuple[Array, Array, Array]:
         ]
     )
     covs = [c for c, k in zip(locs.get("covariance", [()] * len(ok)), ok) if k]
-    cov = np.array(
-        [np.reshape(c, (3, 3)) if len(c) == 9 else np.full((3, 3), np.nan) for c in covs]
-    )
+    cov = stored_covariances(covs, np.full((3, 3), np.nan))
     right = (np.asarray(locs["position_error_3d_m"], np.float64)[ok] <= WRONG_THRESHOLD[0]) & (
         np.asarray(locs["rotation_error_deg"], np.float64)[ok] <= WRONG_THRESHOLD[1]
     )
-    return errors, cov.reshape(-1, 3, 3), right
+    return errors, cov, right
 
 
 def answer_nees(locs: Mapping[str, Any]) -> Array:
