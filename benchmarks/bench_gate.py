@@ -21,7 +21,9 @@ taken apart too: the longest stretch in that window with no answer fused (the fi
 alone), how many queries went unanswered there and how many of those a localizer's
 ``min_inliers`` turned away, and the filter's heading error where that stretch began and a second
 before the failure (before a collision turns the car), beside its heading error over every step
-of the drives.
+of the drives. Where the answers carry their own covariance (``localizer: {covariance:
+estimate}``), how consistent it is for the right ones (their NEES against the truth at the
+query's time), and the image noise at which it would be: at the median, and for 95 % of them.
 """
 
 from __future__ import annotations
@@ -30,11 +32,21 @@ import numpy as np
 from numpy.typing import NDArray
 
 from bench_off_line import stored_cut_parser
-from vlocbench.bench.consistency import COV_COLUMNS, nees, stored_covariances, upper_to_full
+from vlocbench.bench.consistency import (
+    CHI2_3_95,
+    COV_COLUMNS,
+    answer_nees,
+    nees,
+    stored_covariances,
+    upper_to_full,
+)
 from vlocbench.bench.experiment import load_experiment
+from vlocbench.bench.methods import MethodSpec
 from vlocbench.bench.metrics import wrong_answers
 from vlocbench.bench.store import read_episode_table, read_episodes
 from vlocbench.geometry import wrap_angle
+
+CHI2_3_MEDIAN = 2.3660  # the median of a chi-square with 3 degrees of freedom
 
 
 def gate_distances(
@@ -93,6 +105,7 @@ def main() -> None:
         headings: list[NDArray] = []
         for task in drives:
             answers = read_episode_table(store, task.key, "localizations")
+            own_nees = answer_nees(answers)  # under the answer's own covariance, NaN if none
             answered = answers["success"].astype(bool)
             unanswered = {k: np.asarray(v)[~answered] for k, v in answers.items()}
             answers = {k: np.asarray(v)[answered] for k, v in answers.items()}
@@ -129,6 +142,7 @@ def main() -> None:
                 ("inliers", answers["inliers"].astype(float)),
                 ("fused", fused),
                 ("right", right),
+                ("own_nees", own_nees),
             ):
                 columns.setdefault(name, []).append(v)
         a = {k: np.concatenate(v) for k, v in columns.items()}
@@ -162,6 +176,9 @@ def main() -> None:
                 f"it began {stat(heading_from)} deg, a second before the failure {stat(heading)}"
             )
         print(f"  the filter's heading error over every step: {stat(np.concatenate(headings))} deg")
+        own = a["own_nees"][a["right"]]
+        if np.isfinite(own).any():
+            print_own_covariance(own[np.isfinite(own)], drives[0].method)
         fused = a["fused"]
         if fused.any():
             var = np.median(a["sigma"][fused]) ** 2 / 2 + np.median(a["answer_var"][fused])
@@ -175,6 +192,20 @@ def main() -> None:
                 f"{int((under & fused & ~a['right']).sum())} of the wrong answers fused and "
                 f"{int((under & fused & a['right']).sum())} of the right ones"
             )
+
+
+def print_own_covariance(right_nees: NDArray, method: MethodSpec | None) -> None:
+    """How consistent the right answers' own covariances are (``right_nees``: their NEES under
+    it), and the image noise at which they would be: the covariance scales with its square."""
+    px = method.localizer.pixel_noise_px if method is not None else 1.0
+    median_px = px * np.sqrt(np.median(right_nees) / CHI2_3_MEDIAN)
+    p95_px = px * np.sqrt(np.percentile(right_nees, 95) / CHI2_3_95)
+    print(
+        f"  the right answers' own covariance ({px:g} px of image noise): NEES {stat(right_nees)} "
+        f"({CHI2_3_MEDIAN:.2f} at the median if consistent), the truth inside its 95 % ellipse "
+        f"for {100 * np.mean(right_nees <= CHI2_3_95):.1f} %; the median consistent at "
+        f"{median_px:.2f} px, 95 % inside at {p95_px:.2f} px"
+    )
 
 
 def in_window(times_s: NDArray, window: tuple[float, float]) -> NDArray[np.bool_]:
