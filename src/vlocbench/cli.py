@@ -794,7 +794,8 @@ def _add_experiment_verbs(sub: Any, shared: dict[str, argparse.ArgumentParser]) 
         "--setup",
         action="append",
         help="only this setup of its sweep, by its label (k=0 or illumination.k=0; a grouped "
-        "level by its fields, 'dz_m=4, pitch_down_deg=22.5'; repeat the option for more)",
+        "level by its fields, 'dz_m=4, pitch_down_deg=22.5'; where several keys are swept, one "
+        "key's level, k=8, names every setup at it; repeat the option for more)",
     )
     p.add_argument(
         "--repetitions",

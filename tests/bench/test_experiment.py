@@ -389,3 +389,25 @@ def test_a_query_camera_with_another_tone_curve_than_the_gallerys_is_said():
     same = {**base, "gallery": one_camera, "sweep": {"exposure.tone_curve": ["filmic"]}}
     assert load_experiment(same).camera_mismatches() == []
     assert load_experiment(base).camera_mismatches() == []
+
+
+def test_one_keys_level_names_every_setup_at_it():
+    whole = _spec(
+        sweep={"illumination.k": [8, 10], "episode.ekf.late_measurements": ["current", "replay"]}
+    )
+    night = whole.only(setups=["k=8"])
+    assert [x.label for x in night.setups] == [
+        "illumination.k=8, episode.ekf.late_measurements=current",
+        "illumination.k=8, episode.ekf.late_measurements=replay",
+    ]
+    assert whole.only(setups=["illumination.k=8"]).setups == night.setups
+    replayed = whole.only(setups=["episode.ekf.late_measurements=replay"]).setups
+    assert [x.levels for x in replayed] == [
+        (("illumination.k", k), ("episode.ekf.late_measurements", "replay")) for k in (8, 10)
+    ]
+    # a whole label still names its one setup; names given together are their union
+    one = "k=10, episode.ekf.late_measurements=current"
+    assert [x.label for x in whole.only(setups=[one]).setups] == [f"illumination.{one}"]
+    assert len(whole.only(setups=["k=8", one]).setups) == 3
+    with pytest.raises(UnknownNameError, match="unknown setup 'k=9'; valid: "):
+        whole.only(setups=["k=9"])

@@ -287,7 +287,9 @@ class ExperimentPlan:
     ) -> ExperimentPlan:
         """The part of the plan in ``towns``, with ``methods``, of the episode ``kinds`` (recall,
         failure, baseline) and in the ``setups`` of its sweep (by label, ``illumination.k=0``, or
-        without the key's first part, ``k=0``); empty: all of them. ``repetitions``: only the
+        without the key's first part, ``k=0``; where several keys are swept, one key's level
+        names every setup at that level: ``k=8`` both of ``k=8, episode.ekf.late_measurements=
+        current`` and ``...=replay``); empty: all of them. ``repetitions``: only the
         first so many failure and odometry-only drives of each setup (the whole shape of a long
         sweep before its spread); None: all. Its episodes keep their keys, so a later run of the
         whole plan reuses them."""
@@ -299,12 +301,12 @@ class ExperimentPlan:
                 f"must be from 1 to the experiment's {s.repetitions}, got {repetitions}",
             )
         planned = [k for k in EPISODE_KINDS if getattr(s, k)]
-        labels = [x.label for x in self.setups]
+        named = {x.label: setup_names(x) for x in self.setups}
         choices = {
             "town": (towns, s.towns),
             "method": (methods, [m.name for m in s.methods]),
             "episode kind": (kinds, planned),
-            "setup": (setups, list(dict.fromkeys(labels + [short_label(x) for x in labels]))),
+            "setup": (setups, list(dict.fromkeys(n for ns in named.values() for n in ns))),
         }
         for kind, (names, valid) in choices.items():
             for name in names:
@@ -321,11 +323,7 @@ class ExperimentPlan:
             # the first drives of the odometry line: as many as of each method
             baseline_repetitions=repetitions or s.baseline_repetitions,
         )
-        chosen = tuple(
-            x
-            for x in self.setups
-            if not setups or x.label in setups or short_label(x.label) in setups
-        )
+        chosen = tuple(x for x in self.setups if not setups or set(setups) & set(named[x.label]))
         return dataclasses.replace(self, spec=part, setups=chosen)
 
     def methods_of(self, setup: Setup) -> tuple[MethodSpec, ...]:
@@ -480,6 +478,14 @@ def _levels(key: str, value: Any) -> list[Any]:
     if not levels or levels == [[]]:
         raise ConfigError(f"sweep.{key}", "an empty list expands to zero runs")
     return levels
+
+
+def setup_names(setup: Setup) -> tuple[str, ...]:
+    """What names ``setup`` on the command line: its label and its short label
+    (:func:`short_label`), and where several keys are swept, each key's level alone, long and
+    short (``illumination.k=8``, ``k=8``)."""
+    labels = [setup.label] + [_label(k, v) for k, v in setup.levels]
+    return tuple(dict.fromkeys(n for x in labels for n in (x, short_label(x))))
 
 
 def short_label(label: str) -> str:
