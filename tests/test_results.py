@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+import yaml
 
 from vlocbench import results
 from vlocbench.bench.experiment import load_experiment, plan_from_stored
@@ -44,3 +45,24 @@ def test_episodes_of_an_experiment_file_whichever_runs_drove_them(tiny):
     assert set(noon.kind) == {"failure", "recall", "baseline"}
     assert set(noon[noon.kind != "baseline"]["illumination.k"]) == {0}
     assert len(noon) < len(whole)
+
+
+def test_a_sweep_grown_by_a_key_names_the_stored_episodes_by_its_setups(tiny):
+    root, _ = tiny
+    out = root / "out"
+    spec = yaml.safe_load((root / "tiny.yaml").read_text())
+    spec["sweep"]["episode.ekf.late_measurements"] = ["current", "replay"]
+    (root / "tiny_grown.yaml").write_text(yaml.safe_dump(spec, sort_keys=False))
+    before = results.episodes(out, root / "tiny.yaml").set_index("key")
+    grown = results.episodes(out, root / "tiny_grown.yaml").set_index("key")
+    # the stored drives are the grown plan's "current" ones (pure keys), named by its setups
+    assert sorted(grown.index) == sorted(before.index)
+    drives = grown[grown.kind != "baseline"]
+    assert set(drives["episode.ekf.late_measurements"]) == {"current"}
+    assert (drives["illumination.k"] == before.loc[drives.index, "illumination.k"]).all()
+    assert set(drives.setup) == {
+        f"illumination.k={k}, episode.ekf.late_measurements=current" for k in (0, 6)
+    }
+    assert grown.loc[drives.index, "failures_per_km"].equals(
+        before.loc[drives.index, "failures_per_km"]
+    )

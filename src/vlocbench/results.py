@@ -39,13 +39,22 @@ _SPREAD = {
 def episodes(output_dir: str | Path, plan: Experiment | None = None) -> pd.DataFrame:
     """The episodes of the latest run in ``output_dir``, or every stored episode of ``plan`` (an
     experiment file or its plan: the whole experiment, whichever runs drove its parts), a row
-    each: ``ID_COLUMNS``; the setup's swept levels, a column per key (grouped levels spread:
+    each: ``ID_COLUMNS`` (given ``plan``, ``setup`` is that plan's, whichever plan stored the
+    episode); the setup's swept levels, a column per key (grouped levels spread:
     ``weather.fog_visual_range_m``); every metric of ``EpisodeMetrics`` (recall tuples spread over
     ``recall_0.25m_2deg`` ...), the declared metrics by name, and the episode's ``wall_s``.
     Episodes that ended in an error have NaN metrics and their ``error``."""
+    given = plan is not None
     plan, rows = stored_episodes(output_dir, plan)
     levels = {s.label: _levels(s.levels) for s in plan.setups}
-    records = [_record(r, levels.get(r.setup, {})) for r in rows]
+    labels = plan.setups_by_key() if given else {}
+    records = []
+    for r in rows:
+        # under the plan given, the setup it names the episode by (a baseline: the stored one
+        # where that is among the setups it serves)
+        here = labels.get(r.key, ())
+        setup = r.setup if r.setup in here or not here else here[0]
+        records.append(_record(r, setup, levels.get(setup, {})))
     frame = pd.DataFrame.from_records(records)
     if frame.empty:
         return pd.DataFrame(columns=list(ID_COLUMNS))
@@ -79,8 +88,8 @@ def _levels(levels: tuple[tuple[str, Any], ...]) -> dict[str, Any]:
     return out
 
 
-def _record(row: EpisodeRow, levels: dict[str, Any]) -> dict[str, Any]:
-    record: dict[str, Any] = {c: getattr(row, c) for c in ID_COLUMNS} | levels
+def _record(row: EpisodeRow, setup: str, levels: dict[str, Any]) -> dict[str, Any]:
+    record: dict[str, Any] = {c: getattr(row, c) for c in ID_COLUMNS} | {"setup": setup} | levels
     m = row.metrics
     if m is None:
         return record | {"wall_s": row.wall_s}

@@ -1,6 +1,7 @@
 """An episode as a rerun recording."""
 
 import pytest
+import yaml
 
 from vlocbench.bench.store import ResultStore
 
@@ -59,6 +60,13 @@ def test_episodes_of_earlier_runs_by_key_or_by_experiment(tiny, tmp_path):
     night = choose_episode(out, setup="k=6", method="sift", experiment=root / "tiny.yaml")
     assert night.setup.endswith("k=6") and night.kind == "failure"
     assert choose_episode(out, key=night.key[:12]).key == night.key
+    # a sweep grown by a key names the same episode by one key's level, or by its whole label
+    spec = yaml.safe_load((root / "tiny.yaml").read_text())
+    spec["sweep"]["episode.ekf.late_measurements"] = ["current", "replay"]
+    grown = tmp_path / "grown.yaml"
+    grown.write_text(yaml.safe_dump(spec, sort_keys=False))
+    for name in ("k=6", "k=6, episode.ekf.late_measurements=current"):
+        assert choose_episode(out, setup=name, method="sift", experiment=grown).key == night.key
     with pytest.raises(StoreError, match=r"there are: illumination\.k=0"):
         choose_episode(out, setup="k=6", method="sift")  # not in the latest run
     part = {p.parent.name for p in export_run(out, "tum")}

@@ -23,6 +23,7 @@ import copy
 import dataclasses
 import itertools
 import re
+from collections import defaultdict
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -364,6 +365,16 @@ class ExperimentPlan:
             for setup in self.setups:
                 for kind, method, rep in self._jobs(setup):
                     yield self._task(town, town_dict, setup, kind, method, rep)
+
+    def setups_by_key(self) -> dict[str, tuple[str, ...]]:
+        """Each episode key's setup labels: its setup's, or every setup an odometry-only drive
+        serves. A stored episode's own label is the plan's it was run under, which another plan
+        of the same episode (a sweep grown by a key) names otherwise."""
+        out: dict[str, list[str]] = defaultdict(list)
+        for task in self.episodes():
+            if task.setup.label not in out[task.key]:
+                out[task.key].append(task.setup.label)
+        return {k: tuple(v) for k, v in out.items()}
 
     def _jobs(self, setup: Setup) -> list[tuple[EpisodeKind, MethodSpec | None, int]]:
         s = self.spec

@@ -21,10 +21,10 @@ from typing import Any
 
 import numpy as np
 
-from vlocbench.bench.experiment import short_label
+from vlocbench.bench.experiment import setup_names, short_label
 from vlocbench.bench.export import estimate_poses, localizations
 from vlocbench.bench.replay import QueryRenderer, episode_camera
-from vlocbench.bench.runs import Experiment, stored_rows
+from vlocbench.bench.runs import Experiment, stored_episodes
 from vlocbench.bench.store import EpisodeRow, StoreError, read_episode_table, read_episodes
 from vlocbench.bench.towns import route_named, town_named
 from vlocbench.bench.visual import camera_model
@@ -65,14 +65,18 @@ def choose_episode(
         if len(match) != 1:
             raise StoreError(f"{output_dir}: {len(match)} finished episodes match key {key!r}")
         return match[0]
-    done = [r for r in stored_rows(output_dir, experiment) if r.status == "ok"]
-    match = [
-        r
-        for r in done
-        if setup in (None, r.setup, short_label(r.setup)) and method in (None, r.method)
-    ]
+    plan, rows = stored_episodes(output_dir, experiment)
+    done = [r for r in rows if r.status == "ok"]
+    named = {x.label: setup_names(x) for x in plan.setups}
+    labels = plan.setups_by_key()  # the plan's names of each episode, whichever plan stored it
+
+    def names(r: EpisodeRow) -> set[str]:
+        here = labels.get(r.key, (r.setup,))
+        return {n for x in here for n in named.get(x, (x, short_label(x)))}
+
+    match = [r for r in done if (setup is None or setup in names(r)) and method in (None, r.method)]
     if not match:
-        there = sorted({f"{r.setup} / {r.method}" for r in done})
+        there = sorted({f"{x} / {r.method}" for r in done for x in labels.get(r.key, (r.setup,))})
         raise StoreError(
             f"{output_dir}: no finished episode of setup {setup!r} and method "
             f"{method!r}; there are: {', '.join(there)}"
