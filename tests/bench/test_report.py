@@ -100,3 +100,30 @@ def test_a_cell_with_fewer_repetitions_than_planned_says_how_many(tmp_path):
     run_fake_plans(tmp_path, whole)  # the rest: counts no longer shown
     md = write_report(tmp_path, examples=False, plan=whole).markdown.read_text()
     assert " of 2)" not in md and " of 3)" not in md
+
+
+def test_a_numeric_key_swept_with_others_is_the_figures_x_axis(tmp_path):
+    """F against k with a line per level of the other swept key (the filter's handling of late
+    answers), the odometry line as well; a sweep of one non-numeric key: a tick per setup."""
+    from vlocbench.bench.report import write_report
+    from vlocbench.bench.report.figures import figure_series
+
+    late = "episode.ekf.late_measurements"
+    plan = load_experiment(
+        {**ILL_SPEC, "sweep": {"illumination.k": [0, 6], late: ["current", "replay"]}}
+    )
+    run_fake_plans(tmp_path, plan)
+    files = write_report(tmp_path, examples=False, plan=plan)
+    series = figure_series(files.summary)
+    assert series.x == [0.0, 6.0] and series.ticks == ["0", "6"]
+    assert series.xlabel == "illumination.k"
+    assert series.lines == [
+        (f"late_measurements={v}", [f"illumination.k={k}, {late}={v}" for k in (0, 6)])
+        for v in ("current", "replay")
+    ]
+    assert (files.html.parent / "failure_rate_town10.png") in files.figures
+    only_late = load_experiment({**ILL_SPEC, "sweep": {late: ["current", "replay"]}})
+    run_fake_plans(tmp_path / "late", only_late)
+    one = figure_series(write_report(tmp_path / "late", examples=False, plan=only_late).summary)
+    assert one.x == [0, 1] and one.lines == [("", [f"{late}=current", f"{late}=replay"])]
+    assert one.ticks == ["late_measurements=current", "late_measurements=replay"]

@@ -98,14 +98,6 @@ class Summary:
         c = self.cell(town, method, setup)
         return c.failure.mean if c is not None and c.failure is not None else float("nan")
 
-    def level_values(self) -> list[float] | None:
-        """The numeric levels of the one swept key, when there is exactly one and it is numeric."""
-        if len(self.axis) != 1:
-            return None
-        values = [s.levels[0][1] for s in self.setups]
-        if all(isinstance(v, int | float) and not isinstance(v, bool) for v in values):
-            return [float(v) for v in values]
-        return None
 
 
 def _planned_methods(spec: ExperimentSpec) -> tuple[str, ...]:

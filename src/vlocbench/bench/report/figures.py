@@ -6,6 +6,7 @@ Fig. 6), computation time per method."""
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -19,7 +20,7 @@ from vlocbench.bench.consistency import ConfidenceCurve
 from vlocbench.bench.metrics import FailureRate
 from vlocbench.bench.paper import paper_results
 from vlocbench.bench.report.comparison import level_text, ours_per_setup, paper_axis
-from vlocbench.bench.report.tables import setup_header
+from vlocbench.bench.report.tables import level_header, method_label, setup_header
 from vlocbench.bench.requirements import MeasuredAccuracy, OracleSweep
 from vlocbench.bench.summary import BASELINE, Summary
 
@@ -34,15 +35,44 @@ PAPER_COLORS = (
     "#dadaeb",
     "#9edae5",
 )
+MARKERS = "os^Dv<>p"  # one per line of a method: the levels of the swept keys after the first
 COLORS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2", "#17becf")
 
 
-def _x_axis(summary: Summary) -> tuple[list[float], list[str], str]:
-    values = summary.level_values()
-    labels = [setup_header(summary, s.label) for s in summary.setups]
-    if values is not None:
-        return values, [f"{v:g}" for v in values], summary.axis[0]
-    return list(range(len(labels))), labels, ", ".join(summary.axis) or "setup"
+@dataclass(frozen=True)
+class Series:
+    """The failure figure's x axis and its lines. ``x``, ``ticks``: (X,); ``lines``: per
+    combination of the swept keys after the first, its legend text ("" for one line) and the
+    setup label at each x (None where the sweep has no such setup)."""
+
+    x: list[float]
+    ticks: list[str]
+    xlabel: str
+    lines: list[tuple[str, list[str | None]]]
+
+
+def figure_series(summary: Summary) -> Series:
+    """A numeric first swept key is the x axis, a line per combination of the other keys' levels
+    (F against k with the filter's settings beside each other); otherwise each setup is a tick of
+    one line."""
+    setups = summary.setups
+    first = [s.levels[0][1] for s in setups if s.levels]
+    if len(first) < len(setups) or not all(
+        isinstance(v, int | float) and not isinstance(v, bool) for v in first
+    ):
+        ticks = [setup_header(summary, s.label) for s in setups]
+        return Series(
+            list(range(len(setups))),
+            ticks,
+            ", ".join(summary.axis) or "setup",
+            [("", [s.label for s in setups])],
+        )
+    x = list(dict.fromkeys(float(v) for v in first))
+    lines: dict[str, list[str | None]] = {}
+    for setup, value in zip(setups, first):
+        rest = "; ".join(level_header(k, v) for k, v in setup.levels[1:])
+        lines.setdefault(rest, [None] * len(x))[x.index(float(value))] = setup.label
+    return Series(x, [f"{v:g}" for v in x], summary.axis[0], list(lines.items()))
 
 
 def _save(fig: plt.Figure, path: Path) -> Path:
@@ -53,24 +83,38 @@ def _save(fig: plt.Figure, path: Path) -> Path:
 
 
 def failure_figure(summary: Summary, town: str, path: Path) -> Path:
-    x, ticks, xlabel = _x_axis(summary)
+    series = figure_series(summary)
+    x, ticks = np.array(series.x), series.ticks
+    # the lines of one method a little apart, so that their intervals do not hide each other
+    step = np.diff(x).min() if len(x) > 1 else 1.0
+    shift = 0.06 * step * (np.arange(len(series.lines)) - (len(series.lines) - 1) / 2)
     fig, ax = plt.subplots(figsize=(7, 4))
     for method, color in zip(summary.methods, COLORS * 4):
-        cells = [summary.cell(town, method, s.label) for s in summary.setups]
-        f = [c.failure if c else None for c in cells]
-        mean = np.array([v.mean if v else np.nan for v in f])
-        low = np.array([v.low if v else np.nan for v in f])
-        high = np.array([v.high if v else np.nan for v in f])
-        if method == BASELINE:
-            ax.plot(x, mean, "--", color="0.4", label="odometry only")
-            continue
-        ax.errorbar(
-            x, mean, yerr=[mean - low, high - mean], fmt="o-", color=color, capsize=3, label=method
-        )
+        for (rest, labels), marker, dx in zip(series.lines, MARKERS * 4, shift):
+            cells = [summary.cell(town, method, lab) if lab else None for lab in labels]
+            f = [c.failure if c else None for c in cells]
+            mean = np.array([v.mean if v else np.nan for v in f])
+            low = np.array([v.low if v else np.nan for v in f])
+            high = np.array([v.high if v else np.nan for v in f])
+            name = method_label(method) + (f" ({rest})" if rest else "")
+            if method == BASELINE:
+                ax.plot(
+                    x + dx, mean, "--", marker=marker if rest else None, color="0.4", label=name
+                )
+                continue
+            ax.errorbar(
+                x + dx,
+                mean,
+                yerr=[mean - low, high - mean],
+                fmt=f"{marker}-",
+                color=color,
+                capsize=3,
+                label=name,
+            )
     ax.set_xticks(
         x, ticks, rotation=30 if len(ticks) > 6 else 0, ha="right" if len(ticks) > 6 else "center"
     )
-    ax.set_xlabel(xlabel)
+    ax.set_xlabel(series.xlabel)
     ax.set_ylabel("failure rate F (1/km)")
     ax.set_ylim(bottom=0)
     ax.set_title(f"{summary.town_names[town]}: failure rate (95 % CI)")

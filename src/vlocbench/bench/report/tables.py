@@ -6,7 +6,7 @@ failures by cause and place, and the odometry's drift."""
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from typing import Literal
+from typing import Any, Literal
 
 import matplotlib
 
@@ -25,18 +25,16 @@ Table = tuple[list[str], list[list[str]]]  # header, rows
 def setup_header(summary: Summary, label: str) -> str:
     """A setup's column header: its levels without the dotted prefixes."""
     setup = next(s for s in summary.setups if s.label == label)
-    if not setup.levels:
-        return "default"
-    parts = []
-    for key, value in setup.levels:
-        name = key.split(".")[-1]
-        if isinstance(value, dict):
-            parts.append(", ".join(f"{k}={value[k]}" for k in sorted(value)))
-        elif key == "cameras":
-            parts.append(f"{len(value)} cameras")
-        else:
-            parts.append(f"{name}={value}")
-    return "; ".join(parts)
+    return "; ".join(level_header(key, value) for key, value in setup.levels) or "default"
+
+
+def level_header(key: str, value: Any) -> str:
+    """One swept key's level as a header shows it: ``k=8``, a grouped level's fields."""
+    if isinstance(value, dict):
+        return ", ".join(f"{k}={value[k]}" for k in sorted(value))
+    if key == "cameras":
+        return f"{len(value)} cameras"
+    return f"{key.split('.')[-1]}={value}"
 
 
 def method_label(method: str) -> str:
