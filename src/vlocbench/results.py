@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from vlocbench.bench.experiment import setup_label_of
 from vlocbench.bench.metrics import PLACE_RADII_M, PLACE_RANKS, RECALL_THRESHOLDS
 from vlocbench.bench.runs import Experiment, stored_episodes
 from vlocbench.bench.store import EpisodeRow, read_episode_table
@@ -48,13 +49,8 @@ def episodes(output_dir: str | Path, plan: Experiment | None = None) -> pd.DataF
     plan, rows = stored_episodes(output_dir, plan)
     levels = {s.label: _levels(s.levels) for s in plan.setups}
     labels = plan.setups_by_key() if given else {}
-    records = []
-    for r in rows:
-        # under the plan given, the setup it names the episode by (a baseline: the stored one
-        # where that is among the setups it serves)
-        here = labels.get(r.key, ())
-        setup = r.setup if r.setup in here or not here else here[0]
-        records.append(_record(r, setup, levels.get(setup, {})))
+    setups = [setup_label_of(labels, r.key, r.setup) for r in rows]
+    records = [_record(r, x, levels.get(x, {})) for r, x in zip(rows, setups)]
     frame = pd.DataFrame.from_records(records)
     if frame.empty:
         return pd.DataFrame(columns=list(ID_COLUMNS))

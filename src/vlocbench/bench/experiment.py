@@ -491,6 +491,15 @@ def _levels(key: str, value: Any) -> list[Any]:
     return levels
 
 
+def setup_label_of(labels: Mapping[str, tuple[str, ...]], key: str, stored: str) -> str:
+    """The setup a plan names a stored episode by (``labels``: its
+    :meth:`~ExperimentPlan.setups_by_key`): the label it was ``stored`` under where that is one
+    of the key's (an odometry-only drive serves several), else the key's first; the stored one
+    for a key the plan has not."""
+    here = labels.get(key, ())
+    return stored if stored in here or not here else here[0]
+
+
 def setup_names(setup: Setup) -> tuple[str, ...]:
     """What names ``setup`` on the command line: its label and its short label
     (:func:`short_label`), and where several keys are swept, each key's level alone, long and

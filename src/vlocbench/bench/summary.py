@@ -99,7 +99,6 @@ class Summary:
         return c.failure.mean if c is not None and c.failure is not None else float("nan")
 
 
-
 def _planned_methods(spec: ExperimentSpec) -> tuple[str, ...]:
     return tuple(m.name for m in spec.methods) + ((BASELINE,) if spec.baseline else ())
 

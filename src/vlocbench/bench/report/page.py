@@ -8,7 +8,7 @@ import base64
 import html
 import logging
 import string
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from importlib import resources
 from pathlib import Path
 
@@ -17,6 +17,7 @@ import matplotlib
 matplotlib.use("Agg")
 import numpy as np
 
+from vlocbench.bench.experiment import setup_label_of
 from vlocbench.bench.report.tables import Table, method_label, not_stored_line
 from vlocbench.bench.store import EpisodeRow
 from vlocbench.bench.summary import BASELINE, Summary
@@ -104,25 +105,33 @@ def _examples_html(summary: Summary) -> str:
     return "\n".join(parts)
 
 
-def _errors_html(errors: Sequence[EpisodeRow]) -> str:
-    if not errors:
+def _setup_of(summary: Summary) -> Callable[[EpisodeRow], str]:
+    """A stored episode's setup as the reported plan names it (another plan may have stored it)."""
+    labels = summary.plan.setups_by_key()
+    return lambda r: setup_label_of(labels, r.key, r.setup)
+
+
+def _errors_html(summary: Summary) -> str:
+    if not summary.errors:
         return ""
+    setup_of = _setup_of(summary)
     parts = ["<h2 class='err'>Episodes that ended in an error</h2>"]
-    for r in errors:
-        what = f"{r.town} {r.method} {r.kind} {r.setup} rep {r.repetition}"
+    for r in summary.errors:
+        what = f"{r.town} {r.method} {r.kind} {setup_of(r)} rep {r.repetition}"
         parts.append(f"<p>{html.escape(what)}</p><pre>{html.escape(r.error or '')}</pre>")
     return "\n".join(parts)
 
 
-def _recordings_html(rows: Sequence[EpisodeRow], out: Path) -> str:
+def _recordings_html(summary: Summary, rows: Sequence[EpisodeRow], out: Path) -> str:
     """Links to the rerun recordings ``vlocbench view`` wrote next to the report."""
     folder = out.parent / VIEW_DIR
     by_key = {r.key: r for r in rows}
+    setup_of = _setup_of(summary)
     items = []
     for path in sorted(folder.glob("*.rrd")) if folder.is_dir() else ():
         r = by_key.get(path.stem)
         what = (
-            f"{r.kind} drive, {r.town}, {method_label(r.method)}, {r.setup}, "
+            f"{r.kind} drive, {r.town}, {method_label(r.method)}, {setup_of(r)}, "
             f"repetition {r.repetition}"
             if r
             else "an episode of another run"
@@ -164,8 +173,8 @@ def write_page(
             ),
             figures="\n".join(_figure_html(p.read_bytes(), "image/png", p.stem) for p in figures),
             examples=_examples_html(summary) if examples else "",
-            recordings=_recordings_html(rows, out),
-            error_details=_errors_html(summary.errors),
+            recordings=_recordings_html(summary, rows, out),
+            error_details=_errors_html(summary),
         )
     )
     return page
