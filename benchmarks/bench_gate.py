@@ -12,7 +12,8 @@ answer's covariance (its own, or the episode's pose covariance); the share of an
 ``distance < gate`` agrees with the stored ``fused`` says how exact that is. Prints, per setup,
 for the right answers fused, the wrong ones fused and the wrong ones rejected: how many, and
 medians of the innovation (m), of the filter's position sigma (m, sqrt(var x + var y)), of the
-distance, and of the PnP inliers (10th and 90th percentiles in brackets); the innovation the gate
+distance, and of the PnP inliers (10th and 90th percentiles in brackets); the wrong answers fused
+one by one where they are few, with where the car truly was (a place again?); the innovation the gate
 admits at the fused answers' median covariances (purely positional ones: gate x sqrt((var x + var
 y) / 2 + the answer's var x)); what a floor on the PnP inliers (``--floors``) would have kept
 out of the filter; and how many of the drives' failures came within ``--window-s`` of a wrong
@@ -46,6 +47,7 @@ from vlocbench.bench.metrics import wrong_answers
 from vlocbench.bench.store import read_episode_table, read_episodes
 from vlocbench.geometry import wrap_angle
 
+MAX_LISTED = 12  # the wrong answers fused are listed one by one up to this many
 CHI2_3_MEDIAN = 2.3660  # the median of a chi-square with 3 degrees of freedom
 
 
@@ -143,6 +145,11 @@ def main() -> None:
                 ("fused", fused),
                 ("right", right),
                 ("own_nees", own_nees),
+                ("repetition", np.full(len(d), task.repetition)),
+                ("x_m", answers["true_x_m"]),
+                ("y_m", answers["true_y_m"]),
+                ("error_m", answers["position_error_3d_m"]),
+                ("error_deg", answers["rotation_error_deg"]),
             ):
                 columns.setdefault(name, []).append(v)
         a = {k: np.concatenate(v) for k, v in columns.items()}
@@ -163,6 +170,18 @@ def main() -> None:
                 if where.any()
             ]
             print(f"  {name}: {int(where.sum())} | " + " | ".join(cells))
+        wrong_fused = np.flatnonzero(~a["right"] & a["fused"])
+        if 0 < len(wrong_fused) <= MAX_LISTED:
+            print(
+                "  the wrong answers fused (repetition, the car's true x, y m: error m / deg, "
+                "inliers): "
+                + "; ".join(
+                    f"{a['repetition'][i]:.0f}, ({a['x_m'][i]:.0f}, {a['y_m'][i]:.0f}): "
+                    f"{a['error_m'][i]:.2f} / "
+                    f"{a['error_deg'][i]:.1f}, {a['inliers'][i]:.0f}"
+                    for i in wrong_fused
+                )
+            )
         print(
             f"  failures with a wrong answer fused in the {args.window_s:g} s before: "
             f"{after_wrong} of {after_wrong + len(others)}"
