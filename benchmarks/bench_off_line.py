@@ -75,6 +75,11 @@ def stored_cut_parser(setup_help: str, many: bool = False) -> argparse.ArgumentP
 def main() -> None:
     args = stored_cut_parser("a label of the sweep, e.g. k=10").parse_args()
     plan = load_experiment(args.experiment).only([args.town], [args.method], setups=[args.setup])
+    if len(plan.setups) != 1:  # a level of one key of several swept
+        raise SystemExit(
+            f"{args.setup!r} names {len(plan.setups)} setups; name one of: "
+            + "; ".join(x.label for x in plan.setups)
+        )
     store = args.store or plan.output_dir
     stored = {r.key for r in read_episodes(store) if r.metrics is not None}
     tasks = [t for t in plan.tasks() if t.key in stored and t.method is not None]
