@@ -6,7 +6,8 @@
 Reads the stored failure drives of one town and method at each setup (the present plan's keys), no
 rendering. Each answer is right within (5 m, 10 deg), 6-DoF (the confident-wrong threshold). Its
 gate is reconstructed from the stored trajectory: the filter's rear-axle pose and covariance at
-the last step before the answer arrived (the query's time plus its latency), the answer moved to
+the last step before the answer arrived (the query's time plus its latency; with
+``late_measurements: replay``, before the query's time, where the filter inserts it), the answer moved to
 the rear axle as the episode does, and the Mahalanobis distance of the innovation with the
 answer's covariance (its own, or the episode's pose covariance); the share of answers where
 ``distance < gate`` agrees with the stored ``fused`` says how exact that is. Prints, per setup,
@@ -52,14 +53,20 @@ CHI2_3_MEDIAN = 2.3660  # the median of a chi-square with 3 degrees of freedom
 
 
 def gate_distances(
-    answers: dict[str, NDArray], trajectory: dict[str, NDArray], rear_m: float, pose_cov: NDArray
+    answers: dict[str, NDArray],
+    trajectory: dict[str, NDArray],
+    rear_m: float,
+    pose_cov: NDArray,
+    replayed: bool = False,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """Per answer (N,): the Mahalanobis distance of its innovation against the filter before it
-    arrived, the innovation's length (m) and the filter's position sigma (m). ``trajectory``'s
-    pose and covariance are the vehicle's (the rear axle's moved forward by ``rear_m``);
-    ``pose_cov`` (N, 3, 3): the answers' covariances."""
+    arrived (``replayed``, ``late_measurements: replay``: before its image was taken, where the
+    filter inserts it), the innovation's length (m) and the filter's position sigma (m).
+    ``trajectory``'s pose and covariance are the vehicle's (the rear axle's moved forward by
+    ``rear_m``); ``pose_cov`` (N, 3, 3): the answers' covariances."""
     t = trajectory["time_s"]
-    i = np.clip(np.searchsorted(t, answers["time_s"] + answers["latency_s"]) - 1, 0, len(t) - 1)
+    at_s = answers["time_s"] + (0.0 if replayed else answers["latency_s"])
+    i = np.clip(np.searchsorted(t, at_s) - 1, 0, len(t) - 1)
     yaw_e = trajectory["ekf_yaw_rad"][i]
     c, s = np.cos(yaw_e), np.sin(yaw_e)
     rear_e = np.stack(
@@ -120,6 +127,7 @@ def main() -> None:
                 trajectory,
                 0.5 * task.episode.vehicle.wheelbase_m,  # the filter's rear axle, as the episode's
                 pose_cov,
+                replayed=task.episode.ekf.late_measurements == "replay",
             )
             right = ~wrong_answers(answers["position_error_3d_m"], answers["rotation_error_deg"])
             arrived_s = answers["time_s"] + answers["latency_s"]
