@@ -35,7 +35,9 @@ PAPER_COLORS = (
     "#dadaeb",
     "#9edae5",
 )
-MARKERS = "os^Dv<>p"  # one per line of a method: the levels of the swept keys after the first
+# one marker and line style per line of a method: the levels of the swept keys after the first
+MARKERS = "os^Dv<>p"
+LINE_STYLES = ("-", ":", "-.", (0, (5, 1)))
 COLORS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2", "#17becf")
 
 
@@ -90,7 +92,8 @@ def failure_figure(summary: Summary, town: str, path: Path) -> Path:
     shift = 0.06 * step * (np.arange(len(series.lines)) - (len(series.lines) - 1) / 2)
     fig, ax = plt.subplots(figsize=(7, 4))
     for method, color in zip(summary.methods, COLORS * 4):
-        for (rest, labels), marker, dx in zip(series.lines, MARKERS * 4, shift):
+        for k, ((rest, labels), dx) in enumerate(zip(series.lines, shift)):
+            marker = MARKERS[k % len(MARKERS)]
             cells = [summary.cell(town, method, lab) if lab else None for lab in labels]
             f = [c.failure if c else None for c in cells]
             mean = np.array([v.mean if v else np.nan for v in f])
@@ -106,7 +109,8 @@ def failure_figure(summary: Summary, town: str, path: Path) -> Path:
                 x + dx,
                 mean,
                 yerr=[mean - low, high - mean],
-                fmt=f"{marker}-",
+                marker=marker,
+                linestyle=LINE_STYLES[k % len(LINE_STYLES)],
                 color=color,
                 capsize=3,
                 label=name,
