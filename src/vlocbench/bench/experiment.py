@@ -26,6 +26,7 @@ import re
 from collections import defaultdict
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
@@ -366,10 +367,12 @@ class ExperimentPlan:
                 for kind, method, rep in self._jobs(setup):
                     yield self._task(town, town_dict, setup, kind, method, rep)
 
-    def setups_by_key(self) -> dict[str, tuple[str, ...]]:
+    @cached_property
+    def setups_by_key(self) -> Mapping[str, tuple[str, ...]]:
         """Each episode key's setup labels: its setup's, or every setup an odometry-only drive
         serves. A stored episode's own label is the plan's it was run under, which another plan
-        of the same episode (a sweep grown by a key) names otherwise."""
+        of the same episode (a sweep grown by a key) names otherwise. Computed once a plan: its
+        keys hash every episode's configuration."""
         out: dict[str, list[str]] = defaultdict(list)
         for task in self.episodes():
             if task.setup.label not in out[task.key]:
@@ -493,7 +496,7 @@ def _levels(key: str, value: Any) -> list[Any]:
 
 def setup_label_of(labels: Mapping[str, tuple[str, ...]], key: str, stored: str) -> str:
     """The setup a plan names a stored episode by (``labels``: its
-    :meth:`~ExperimentPlan.setups_by_key`): the label it was ``stored`` under where that is one
+    :attr:`~ExperimentPlan.setups_by_key`): the label it was ``stored`` under where that is one
     of the key's (an odometry-only drive serves several), else the key's first; the stored one
     for a key the plan has not."""
     here = labels.get(key, ())

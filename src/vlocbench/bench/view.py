@@ -68,7 +68,7 @@ def choose_episode(
     plan, rows = stored_episodes(output_dir, experiment)
     done = [r for r in rows if r.status == "ok"]
     named = {x.label: setup_names(x) for x in plan.setups}
-    labels = plan.setups_by_key()  # the plan's names of each episode, whichever plan stored it
+    labels = plan.setups_by_key  # the plan's names of each episode, whichever plan stored it
 
     def names(r: EpisodeRow) -> set[str]:
         here = labels.get(r.key, (r.setup,))

@@ -107,7 +107,7 @@ def _examples_html(summary: Summary) -> str:
 
 def _setup_of(summary: Summary) -> Callable[[EpisodeRow], str]:
     """A stored episode's setup as the reported plan names it (another plan may have stored it)."""
-    labels = summary.plan.setups_by_key()
+    labels = summary.plan.setups_by_key
     return lambda r: setup_label_of(labels, r.key, r.setup)
 
 
