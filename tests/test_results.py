@@ -47,14 +47,14 @@ def test_episodes_of_an_experiment_file_whichever_runs_drove_them(tiny):
     assert len(noon) < len(whole)
 
 
-def test_a_sweep_grown_by_a_key_names_the_stored_episodes_by_its_setups(tiny):
+def test_a_sweep_grown_by_a_key_names_the_stored_episodes_by_its_setups(tiny, tmp_path):
     root, _ = tiny
     out = root / "out"
     spec = yaml.safe_load((root / "tiny.yaml").read_text())
     spec["sweep"]["episode.ekf.late_measurements"] = ["current", "replay"]
-    (root / "tiny_grown.yaml").write_text(yaml.safe_dump(spec, sort_keys=False))
+    (tmp_path / "tiny_grown.yaml").write_text(yaml.safe_dump(spec, sort_keys=False))
     before = results.episodes(out, root / "tiny.yaml").set_index("key")
-    grown = results.episodes(out, root / "tiny_grown.yaml").set_index("key")
+    grown = results.episodes(out, tmp_path / "tiny_grown.yaml").set_index("key")
     # the stored drives are the grown plan's "current" ones (pure keys), named by its setups
     assert sorted(grown.index) == sorted(before.index)
     drives = grown[grown.kind != "baseline"]
