@@ -34,6 +34,10 @@ def test_failure_rate_bootstrap_interval():
     assert f.mean == 20.0 and f.repetitions == 5
     assert 0.0 <= f.low < f.mean < f.high <= 40.0
     assert failure_rate([10.0, 20.0, 30.0, 0.0, 40.0]) == f  # seeded
+    uneven = [0.1, 3.7, 0.0, 12.9, 0.4]
+    a, b = failure_rate(uneven), failure_rate(uneven[::-1])
+    assert (a.low, a.high) == (b.low, b.high)  # the values decide, not their order
+    assert b.per_repetition == tuple(uneven[::-1])
     one = failure_rate([7.0])
     assert (one.low, one.mean, one.high) == (7.0, 7.0, 7.0)
     assert np.isnan(failure_rate([]).mean)

@@ -109,3 +109,17 @@ def test_a_run_in_parts_reports_the_towns_and_methods_it_has_and_names_the_rest(
     assert "towns: town10 (nothing stored yet for town01" in page and "methods: sift;" in page
     whole = summarize(spec, rows)
     assert whole.towns == ("town01", "town10") and not not_stored_line(whole)
+
+
+def test_a_cells_repetitions_are_read_in_repetition_order_whatever_the_row_order(tmp_path):
+    """The store gives rows by key (a hash); F's repetitions and interval must not follow it."""
+    run_fake_plans(tmp_path, load_experiment({**ILL_SPEC, "repetitions": 4}))
+    stored, rows = read_latest_run(tmp_path)
+    plan = plan_from_stored(stored)
+    cells = [
+        summarize(plan, order).cell("town10", "sift", "default")
+        for order in (rows, rows[::-1], sorted(rows, key=lambda r: -r.repetition))
+    ]
+    assert all(c is not None and c.failure == cells[0].failure for c in cells)
+    per_rep = cells[0].failure.per_repetition
+    assert [v > 0 for v in per_rep] == [False, True, False, True]  # fakes fail on odd ones

@@ -357,8 +357,9 @@ class FailureRate:
 def bootstrap_means(
     values: Sequence[float] | NDArray[np.float64], rng: np.random.Generator, resamples: int
 ) -> NDArray[np.float64]:
-    """(resamples,) means of ``values`` drawn again with replacement."""
-    x = np.asarray(values, np.float64)
+    """(resamples,) means of ``values`` drawn again with replacement, from the sorted values: the
+    same values in any order give the same means."""
+    x = np.sort(np.asarray(values, np.float64))
     return x[rng.integers(0, len(x), (resamples, len(x)))].mean(axis=1)
 
 
@@ -372,7 +373,8 @@ def failure_rate(
     failures_per_km: Sequence[float], resamples: int = 2000, seed: int = 0
 ) -> FailureRate:
     """F = mean of the repetitions' r_i / L_km; a percentile bootstrap over repetitions (seeded:
-    the same inputs give the same interval). One repetition gives a zero-width interval."""
+    the same values, in any order, give the same interval). One repetition gives a zero-width
+    interval."""
     x = np.asarray(failures_per_km, np.float64)
     if len(x) == 0:
         return FailureRate(float("nan"), float("nan"), float("nan"), 0)

@@ -128,7 +128,9 @@ def _drive(world: dict[str, Any], episode: dict[str, Any]) -> dict[str, Any]:
 
 
 def _cell(key: tuple[str, str, str], group: list[EpisodeRow], errors: int) -> Cell:
-    """The figures of one (town, method, setup) from its episodes' stored metrics."""
+    """The figures of one (town, method, setup) from its episodes' stored metrics, read in
+    repetition order (the store gives them by key)."""
+    group = sorted(group, key=lambda r: (r.repetition, r.key))
     fail = [r.metrics for r in group if r.kind in ("failure", "baseline") and r.metrics]
     rec = [r.metrics for r in group if r.kind == "recall" and r.metrics]
     sites = [s for m in fail for s in m.failure_sites_s_m]
