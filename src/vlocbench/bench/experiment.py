@@ -368,16 +368,25 @@ class ExperimentPlan:
                     yield self._task(town, town_dict, setup, kind, method, rep)
 
     @cached_property
-    def setups_by_key(self) -> Mapping[str, tuple[str, ...]]:
-        """Each episode key's setup labels: its setup's, or every setup an odometry-only drive
-        serves. A stored episode's own label is the plan's it was run under, which another plan
-        of the same episode (a sweep grown by a key) names otherwise. Computed once a plan: its
-        keys hash every episode's configuration."""
-        out: dict[str, list[str]] = defaultdict(list)
+    def cells_by_key(self) -> Mapping[str, tuple[tuple[str, str, str], ...]]:
+        """Each episode key's (town, method, setup label) cells: its setup's, or every setup an
+        odometry-only drive serves. Computed once a plan: its keys hash every episode's
+        configuration."""
+        out: dict[str, list[tuple[str, str, str]]] = defaultdict(list)
         for task in self.episodes():
-            if task.setup.label not in out[task.key]:
-                out[task.key].append(task.setup.label)
+            cell = (task.town, task.method_name, task.setup.label)
+            if cell not in out[task.key]:
+                out[task.key].append(cell)
         return {k: tuple(v) for k, v in out.items()}
+
+    @cached_property
+    def setups_by_key(self) -> Mapping[str, tuple[str, ...]]:
+        """Each episode key's setup labels (of :attr:`cells_by_key`). A stored episode's own
+        label is the plan's it was run under, which another plan of the same episode (a sweep
+        grown by a key) names otherwise."""
+        return {
+            key: tuple(label for _, _, label in cells) for key, cells in self.cells_by_key.items()
+        }
 
     def _jobs(self, setup: Setup) -> list[tuple[EpisodeKind, MethodSpec | None, int]]:
         s = self.spec

@@ -176,11 +176,7 @@ def summarize(plan: ExperimentPlan, rows: Sequence[EpisodeRow]) -> Summary:
     ``plan``. Rows are found by the keys of the plan's episodes, so an episode another experiment
     stored first counts under this plan's setup; a row of none of them (stored by an earlier
     EPISODE_VERSION, as when an old run's report is made again) counts where it was stored."""
-    cells_of: dict[str, list[tuple[str, str, str]]] = defaultdict(list)
-    for task in plan.episodes():
-        cell = (task.town, task.method_name, task.setup.label)
-        if cell not in cells_of[task.key]:
-            cells_of[task.key].append(cell)
+    cells_of = plan.cells_by_key
     drives = [
         (s.label, _drive(to_dict(baseline_drive(s.conditions)), to_dict(s.episode)))
         for s in plan.setups
