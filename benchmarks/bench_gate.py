@@ -20,15 +20,18 @@ y) / 2 + the answer's var x)); what a floor on the PnP inliers (``--floors``) wo
 out of the filter; and how many of the drives' failures came within ``--window-s`` of a wrong
 answer fused (a failure's time: when the car was nearest to its site). The other failures are
 taken apart too: the longest stretch in that window with no answer fused (the filter on odometry
-alone), how many queries went unanswered there and how many of those a localizer's
-``min_inliers`` turned away, and the filter's heading error where that stretch began and a second
-before the failure (before a collision turns the car), beside its heading error over every step
-of the drives. Where the answers carry their own covariance (``localizer: {covariance:
+alone), how many answers the gate turned away there, how many queries went unanswered there and
+how many of those a localizer's ``min_inliers`` turned away, and the filter's heading error where
+that stretch began and a second before the failure (before a collision turns the car), beside its
+heading error over every step of the drives. Where they are few, the failures are listed one by
+one: where, how long after the last wrong answer fused (and how wrong it was), and that stretch. Where the answers carry their own covariance (``localizer: {covariance:
 estimate}``), how consistent it is for the right ones (their NEES against the truth at the
 query's time), and the image noise at which it would be: at the median, and for 95 % of them.
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
@@ -109,8 +112,7 @@ def main() -> None:
         if gate is None:
             raise SystemExit(f"{setup.label}: the filter has no Mahalanobis gate")
         columns: dict[str, list[NDArray]] = {}
-        after_wrong = 0
-        others: list[tuple[float, int, int, float, float]] = []
+        failures: list[FailureContext] = []
         headings: list[NDArray] = []
         for task in drives:
             answers = read_episode_table(store, task.key, "localizations")
@@ -132,17 +134,34 @@ def main() -> None:
             right = ~wrong_answers(answers["position_error_3d_m"], answers["rotation_error_deg"])
             arrived_s = answers["time_s"] + answers["latency_s"]
             fused = answers["fused"].astype(bool)
-            fused_s, wrong_fused_s = arrived_s[fused], arrived_s[fused & ~right]
+            wrong_fused = fused & ~right
             for x, y in metrics[task.key].failure_sites_xy:
                 # the failure's time: where the car truly was nearest to the failure's site
                 at = np.hypot(trajectory["true_x_m"] - x, trajectory["true_y_m"] - y).argmin()
-                t_s = trajectory["time_s"][at]
-                window = (t_s - args.window_s, t_s)
-                if in_window(wrong_fused_s, window).any():
-                    after_wrong += 1
-                    continue
-                others.append(
-                    failure_context(fused_s, unanswered, trajectory["time_s"], heading_deg, window)
+                t_s = float(trajectory["time_s"][at])
+                before = np.flatnonzero(wrong_fused & (arrived_s <= t_s))
+                last = before[arrived_s[before].argmax()] if len(before) else None
+                failures.append(
+                    FailureContext(
+                        task.repetition,
+                        x,
+                        y,
+                        t_s,
+                        np.inf if last is None else t_s - float(arrived_s[last]),
+                        ""
+                        if last is None
+                        else f"{answers['position_error_3d_m'][last]:.1f} m / "
+                        f"{answers['rotation_error_deg'][last]:.0f} deg, "
+                        f"{answers['inliers'][last]:.0f} inliers",
+                        *stretch_context(
+                            arrived_s[fused],
+                            arrived_s[~fused],
+                            unanswered,
+                            trajectory["time_s"],
+                            heading_deg,
+                            (t_s - args.window_s, t_s),
+                        ),
+                    )
                 )
             for name, v in (
                 ("d", d),
@@ -190,18 +209,25 @@ def main() -> None:
                     for i in wrong_fused
                 )
             )
+        others = [f for f in failures if f.since_wrong_s > args.window_s]
         print(
             f"  failures with a wrong answer fused in the {args.window_s:g} s before: "
-            f"{after_wrong} of {after_wrong + len(others)}"
+            f"{len(failures) - len(others)} of {len(failures)}"
         )
         if others:
-            gap, missed, floored, heading_from, heading = (np.array(v, float) for v in zip(*others))
             print(
                 f"  the other {len(others)}: the longest stretch with no answer fused "
-                f"{stat(gap)} s, queries unanswered there {int(missed.sum())} "
-                f"({int(floored.sum())} under a min_inliers); the filter's heading error where "
-                f"it began {stat(heading_from)} deg, a second before the failure {stat(heading)}"
+                f"{stat(np.array([f.gap_s for f in others]))} s, answers the gate turned away "
+                f"there {sum(f.rejected for f in others)}, queries unanswered there "
+                f"{sum(f.missed for f in others)} ({sum(f.floored for f in others)} under a "
+                f"min_inliers); the filter's heading error where it began "
+                f"{stat(np.array([f.heading_from_deg for f in others]))} deg, a second before "
+                f"the failure {stat(np.array([f.heading_deg for f in others]))}"
             )
+        if 0 < len(failures) <= MAX_LISTED:
+            print("  each failure:")
+            for f in failures:
+                print(f"    {f}")
         print(f"  the filter's heading error over every step: {stat(np.concatenate(headings))} deg")
         own = a["own_nees"][a["right"]]
         if np.isfinite(own).any():
@@ -240,16 +266,50 @@ def in_window(times_s: NDArray, window: tuple[float, float]) -> NDArray[np.bool_
     return (times_s > window[0]) & (times_s <= window[1])
 
 
-def failure_context(
+@dataclass(frozen=True)
+class FailureContext:
+    """One failure of a drive and what came before it."""
+
+    repetition: int
+    x_m: float
+    y_m: float
+    time_s: float  # when the car was nearest to the failure's site
+    since_wrong_s: float  # since the last wrong answer fused arrived (inf: none before it)
+    wrong: str  # that answer: its error and inliers ("" if none)
+    gap_s: float  # the longest stretch of the window before it with no answer fused
+    rejected: int  # answers the gate turned away in that stretch
+    missed: int  # queries unanswered in that stretch
+    floored: int  # of them, those a min_inliers turned away
+    heading_from_deg: float  # the filter's heading error where the stretch began
+    heading_deg: float  # ... and a second before the failure
+
+    def __str__(self) -> str:
+        last = (
+            f"the last wrong answer fused {self.since_wrong_s:.1f} s before ({self.wrong})"
+            if np.isfinite(self.since_wrong_s)
+            else "no wrong answer fused before"
+        )
+        return (
+            f"repetition {self.repetition}, ({self.x_m:.0f}, {self.y_m:.0f}) m at "
+            f"{self.time_s:.1f} s: {last}; the longest stretch with no answer fused "
+            f"{self.gap_s:.1f} s ({self.rejected} turned away by the gate, {self.missed} "
+            f"unanswered); heading error {self.heading_from_deg:.1f} deg where it began, "
+            f"{self.heading_deg:.1f} a second before"
+        )
+
+
+def stretch_context(
     fused_s: NDArray,
+    rejected_s: NDArray,
     unanswered: dict[str, NDArray],
     time_s: NDArray,
     heading_deg: NDArray,
     window: tuple[float, float],
-) -> tuple[float, int, int, float, float]:
+) -> tuple[float, int, int, int, float, float]:
     """Before a failure at ``window``'s end: the longest stretch of the window with no answer
-    fused (s; ``fused_s``: when each fused answer arrived), the queries unanswered in that stretch
-    and how many of them a ``min_inliers`` turned away (their reason says so), and the filter's
+    fused (s; ``fused_s``, ``rejected_s``: when each answer fused, or turned away by the gate,
+    arrived), the answers the gate turned away in that stretch, the queries unanswered in it and
+    how many of them a ``min_inliers`` turned away (their reason says so), and the filter's
     heading error (deg; ``heading_deg`` at each step of ``time_s``) where the stretch began and a
     second before the failure."""
     edges = np.concatenate([[window[0]], np.sort(fused_s[in_window(fused_s, window)]), [window[1]]])
@@ -260,6 +320,7 @@ def failure_context(
     at = [max(int(np.searchsorted(time_s, s)) - 1, 0) for s in (stretch[0], window[1] - 1.0)]
     return (
         float(np.diff(stretch)[0]),
+        int(in_window(rejected_s, stretch).sum()),
         int(missed.sum()),
         floored,
         float(heading_deg[at[0]]),
