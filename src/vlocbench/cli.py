@@ -244,7 +244,17 @@ def _missing_ros_extra(exc: ImportError) -> VlocbenchError:
 def _view(args: argparse.Namespace) -> int:
     from vlocbench.bench.view import VIEW_DIR, choose_episode, record_episode
 
-    row = choose_episode(args.output, args.episode, args.setup, args.method, args.experiment)
+    row = choose_episode(
+        args.output,
+        args.episode,
+        args.setup,
+        args.method,
+        args.experiment,
+        town=args.town,
+        kind=args.kind,
+        repetition=args.repetition,
+        failed=args.failed,
+    )
     out = args.out or args.output / VIEW_DIR / f"{row.key}.rrd"
     record_episode(args.output, row, out, images=args.images, spawn=args.spawn)
     print(
@@ -501,15 +511,24 @@ def _names(text: str) -> tuple[str, ...]:
     return names
 
 
-def _count(text: str) -> int:
-    """An argparse type: a whole number >= 1."""
+def _whole_number(text: str, least: int) -> int:
     try:
         value = int(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
+    if value < least:
+        raise argparse.ArgumentTypeError(f"must be at least {least}, got {value}")
     return value
+
+
+def _count(text: str) -> int:
+    """An argparse type: a whole number >= 1."""
+    return _whole_number(text, 1)
+
+
+def _index(text: str) -> int:
+    """An argparse type: a whole number >= 0."""
+    return _whole_number(text, 0)
 
 
 def _parents() -> dict[str, argparse.ArgumentParser]:
@@ -854,6 +873,11 @@ def _add_experiment_verbs(sub: Any, shared: dict[str, argparse.ArgumentParser]) 
     )
     p.add_argument("--setup", help="setup label, e.g. k=6 (see the report)")
     p.add_argument("--method", help="method name, or odometry for the baseline")
+    p.add_argument("--town", help="town name (where the store holds several)")
+    # the episode kinds (bench.records.EPISODE_KINDS, not imported: the CLI starts without bench)
+    p.add_argument("--kind", choices=("failure", "recall", "baseline"), help="drive kind")
+    p.add_argument("--repetition", type=_index, help="repetition number, from 0")
+    p.add_argument("--failed", action="store_true", help="the first drive that failed")
     p.add_argument(
         "--images",
         action="store_true",

@@ -72,3 +72,33 @@ def test_episodes_of_earlier_runs_by_key_or_by_experiment(tiny, tmp_path):
     part = {p.parent.name for p in export_run(out, "tum")}
     whole = {p.parent.name for p in export_run(out, "tum", plan)}
     assert night.key in whole - part
+
+
+def test_an_episode_chosen_by_town_kind_repetition_or_as_the_first_that_failed(tmp_path, capsys):
+    """Fake drives fail on odd repetitions; two towns, so the town must be named to be sure."""
+    from tests.bench.fakes import ILL_SPEC, run_fake_plans
+    from vlocbench.bench.experiment import load_experiment
+    from vlocbench.bench.records import EPISODE_KINDS
+    from vlocbench.bench.store import StoreError
+    from vlocbench.bench.view import choose_episode
+    from vlocbench.cli import main
+
+    spec = {**ILL_SPEC, "towns": ["town10", "town01"], "repetitions": 4}
+    run_fake_plans(tmp_path, load_experiment(spec))
+    first = choose_episode(tmp_path, method="sift", town="town01")
+    assert (first.town, first.kind, first.repetition) == ("town01", "failure", 0)
+    crashed = choose_episode(tmp_path, method="sift", town="town01", failed=True)
+    assert crashed.repetition == 1 and crashed.metrics.failures == 1
+    third = choose_episode(tmp_path, town="town10", method="sift", repetition=2)
+    assert (third.town, third.repetition) == ("town10", 2)
+    assert choose_episode(tmp_path, town="town10", kind="recall").kind == "recall"
+    with pytest.raises(StoreError, match="none of the 1 finished episodes of .* failed"):
+        choose_episode(tmp_path, town="town10", kind="recall", failed=True)
+    with pytest.raises(StoreError, match="there are: town01: default / odometry"):
+        choose_episode(tmp_path, town="town02")
+    with pytest.raises(SystemExit) as stop:
+        main(["view", str(tmp_path), "--repetition", "-1"])
+    assert stop.value.code == 2 and "must be at least 0" in capsys.readouterr().err
+    for kind in EPISODE_KINDS:  # the command line's choices are the episode kinds
+        assert main(["view", str(tmp_path), "--kind", kind, "--town", "town02"]) == 1
+        assert f"kind '{kind}'; there are: " in capsys.readouterr().err

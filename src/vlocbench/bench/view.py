@@ -55,10 +55,16 @@ def choose_episode(
     setup: str | None = None,
     method: str | None = None,
     experiment: Experiment | None = None,
+    *,
+    town: str | None = None,
+    kind: str | None = None,
+    repetition: int | None = None,
+    failed: bool = False,
 ) -> EpisodeRow:
-    """The finished episode ``key`` (any stored one), or the first one (failure drives first) of
-    ``setup`` and ``method`` (each optional) in the latest run or in ``experiment``; a clear error
-    lists what there is."""
+    """The finished episode ``key`` (any stored one), or the first one (failure drives first,
+    then by repetition) of the latest run or of ``experiment`` that fits every filter given:
+    ``setup``, ``method``, ``town`` (its name or its spec), ``kind``, ``repetition``, and
+    ``failed`` (a drive with at least one failure); a clear error lists what there is."""
     if key is not None:
         done = [r for r in read_episodes(output_dir) if r.status == "ok"]
         match = [r for r in done if r.key == key or r.key.startswith(key)]
@@ -74,13 +80,42 @@ def choose_episode(
         here = labels.get(r.key, (r.setup,))
         return {n for x in here for n in named.get(x, (x, short_label(x)))}
 
-    match = [r for r in done if (setup is None or setup in names(r)) and method in (None, r.method)]
-    if not match:
-        there = sorted({f"{x} / {r.method}" for r in done for x in labels.get(r.key, (r.setup,))})
-        raise StoreError(
-            f"{output_dir}: no finished episode of setup {setup!r} and method "
-            f"{method!r}; there are: {', '.join(there)}"
+    def fits(r: EpisodeRow) -> bool:
+        return (
+            (setup is None or setup in names(r))
+            and method in (None, r.method)
+            and town in (None, r.town, r.config["town"])
+            and kind in (None, r.kind)
+            and repetition in (None, r.repetition)
         )
+
+    given = {"setup": setup, "method": method, "town": town, "kind": kind}
+    wanted = ", ".join(
+        [f"{k} {v!r}" for k, v in given.items() if v is not None]
+        + ([f"repetition {repetition}"] if repetition is not None else [])
+    )
+    match = [r for r in done if fits(r)]
+    if not match:
+        towns = len({r.town for r in done}) > 1  # name the town where the store has several
+        there = sorted(
+            {
+                f"{r.town}: " * towns + f"{x} / {r.method}"
+                for r in done
+                for x in labels.get(r.key, (r.setup,))
+            }
+        )
+        raise StoreError(
+            f"{output_dir}: no finished episode of {wanted or 'any kind'}; there are: "
+            + ", ".join(there)
+        )
+    if failed:
+        crashed = [r for r in match if r.metrics is not None and r.metrics.failures]
+        if not crashed:
+            raise StoreError(
+                f"{output_dir}: none of the {len(match)} finished episodes of "
+                f"{wanted or 'any kind'} failed"
+            )
+        match = crashed
     order = {"failure": 0, "recall": 1, "baseline": 2}
     return min(match, key=lambda r: (order.get(r.kind, 3), r.repetition, r.key))
 
