@@ -92,7 +92,7 @@ def test_an_episode_chosen_by_town_kind_repetition_or_as_the_first_that_failed(t
     third = choose_episode(tmp_path, town="town10", method="sift", repetition=2)
     assert (third.town, third.repetition) == ("town10", 2)
     assert choose_episode(tmp_path, town="town10", kind="recall").kind == "recall"
-    with pytest.raises(StoreError, match="none of the 1 finished episodes of .* failed"):
+    with pytest.raises(StoreError, match=r"none of the 1 finished episodes of .* failed"):
         choose_episode(tmp_path, town="town10", kind="recall", failed=True)
     with pytest.raises(StoreError, match="there are: town01: default / odometry"):
         choose_episode(tmp_path, town="town02")
