@@ -209,7 +209,8 @@ def main() -> None:
                     for i in wrong_fused
                 )
             )
-        others = [f for f in failures if f.since_wrong_s > args.window_s]
+        # a wrong answer fused in the window (start, end] is one less than window_s before
+        others = [f for f in failures if f.since_wrong_s >= args.window_s]
         print(
             f"  failures with a wrong answer fused in the {args.window_s:g} s before: "
             f"{len(failures) - len(others)} of {len(failures)}"

@@ -89,11 +89,8 @@ def choose_episode(
             and repetition in (None, r.repetition)
         )
 
-    given = {"setup": setup, "method": method, "town": town, "kind": kind}
-    wanted = ", ".join(
-        [f"{k} {v!r}" for k, v in given.items() if v is not None]
-        + ([f"repetition {repetition}"] if repetition is not None else [])
-    )
+    given = {"setup": setup, "method": method, "town": town, "kind": kind, "repetition": repetition}
+    wanted = ", ".join(f"{k} {v!r}" for k, v in given.items() if v is not None)
     match = [r for r in done if fits(r)]
     if not match:
         towns = len({r.town for r in done}) > 1  # name the town where the store has several
