@@ -147,13 +147,15 @@ def main() -> None:
                         x,
                         y,
                         t_s,
-                        np.inf if last is None else t_s - float(arrived_s[last]),
-                        ""
+                        None
                         if last is None
-                        else f"{answers['position_error_3d_m'][last]:.1f} m / "
-                        f"{answers['rotation_error_deg'][last]:.0f} deg, "
-                        f"{answers['inliers'][last]:.0f} inliers",
-                        *stretch_context(
+                        else WrongAnswer(
+                            float(arrived_s[last]),
+                            float(answers["position_error_3d_m"][last]),
+                            float(answers["rotation_error_deg"][last]),
+                            int(answers["inliers"][last]),
+                        ),
+                        stretch_context(
                             arrived_s[fused],
                             arrived_s[~fused],
                             unanswered,
@@ -216,14 +218,15 @@ def main() -> None:
             f"{len(failures) - len(others)} of {len(failures)}"
         )
         if others:
+            stretches = [f.stretch for f in others]
             print(
                 f"  the other {len(others)}: the longest stretch with no answer fused "
-                f"{stat(np.array([f.gap_s for f in others]))} s, answers the gate turned away "
-                f"there {sum(f.rejected for f in others)}, queries unanswered there "
-                f"{sum(f.missed for f in others)} ({sum(f.floored for f in others)} under a "
-                f"min_inliers); the filter's heading error where it began "
-                f"{stat(np.array([f.heading_from_deg for f in others]))} deg, a second before "
-                f"the failure {stat(np.array([f.heading_deg for f in others]))}"
+                f"{stat(np.array([g.length_s for g in stretches]))} s, answers the gate turned "
+                f"away there {sum(g.rejected for g in stretches)}, queries unanswered there "
+                f"{sum(g.missed for g in stretches)} ({sum(g.floored for g in stretches)} under "
+                f"a min_inliers); the filter's heading error where it began "
+                f"{stat(np.array([g.heading_from_deg for g in stretches]))} deg, a second before "
+                f"the failure {stat(np.array([g.heading_deg for g in stretches]))}"
             )
         if 0 < len(failures) <= MAX_LISTED:
             print("  each failure:")
@@ -268,6 +271,39 @@ def in_window(times_s: NDArray, window: tuple[float, float]) -> NDArray[np.bool_
 
 
 @dataclass(frozen=True)
+class WrongAnswer:
+    """A wrong answer the filter fused."""
+
+    arrived_s: float  # the query's time plus its latency
+    error_m: float  # 3D position error
+    error_deg: float  # rotation angle error
+    inliers: int
+
+    def __str__(self) -> str:
+        return f"{self.error_m:.1f} m / {self.error_deg:.0f} deg, {self.inliers} inliers"
+
+
+@dataclass(frozen=True)
+class Stretch:
+    """The longest stretch of a window before a failure with no answer fused."""
+
+    length_s: float
+    rejected: int  # answers the gate turned away in it
+    missed: int  # queries unanswered in it
+    floored: int  # of them, those a min_inliers turned away
+    heading_from_deg: float  # the filter's heading error where it began
+    heading_deg: float  # ... and a second before the failure
+
+    def __str__(self) -> str:
+        return (
+            f"the longest stretch with no answer fused {self.length_s:.1f} s ({self.rejected} "
+            f"turned away by the gate, {self.missed} unanswered); heading error "
+            f"{self.heading_from_deg:.1f} deg where it began, {self.heading_deg:.1f} a second "
+            "before"
+        )
+
+
+@dataclass(frozen=True)
 class FailureContext:
     """One failure of a drive and what came before it."""
 
@@ -275,27 +311,23 @@ class FailureContext:
     x_m: float
     y_m: float
     time_s: float  # when the car was nearest to the failure's site
-    since_wrong_s: float  # since the last wrong answer fused arrived (inf: none before it)
-    wrong: str  # that answer: its error and inliers ("" if none)
-    gap_s: float  # the longest stretch of the window before it with no answer fused
-    rejected: int  # answers the gate turned away in that stretch
-    missed: int  # queries unanswered in that stretch
-    floored: int  # of them, those a min_inliers turned away
-    heading_from_deg: float  # the filter's heading error where the stretch began
-    heading_deg: float  # ... and a second before the failure
+    wrong: WrongAnswer | None  # the last wrong answer fused before it
+    stretch: Stretch
+
+    @property
+    def since_wrong_s(self) -> float:
+        """Since the last wrong answer fused arrived (inf: none before the failure)."""
+        return np.inf if self.wrong is None else self.time_s - self.wrong.arrived_s
 
     def __str__(self) -> str:
         last = (
-            f"the last wrong answer fused {self.since_wrong_s:.1f} s before ({self.wrong})"
-            if np.isfinite(self.since_wrong_s)
-            else "no wrong answer fused before"
+            "no wrong answer fused before"
+            if self.wrong is None
+            else f"the last wrong answer fused {self.since_wrong_s:.1f} s before ({self.wrong})"
         )
         return (
             f"repetition {self.repetition}, ({self.x_m:.0f}, {self.y_m:.0f}) m at "
-            f"{self.time_s:.1f} s: {last}; the longest stretch with no answer fused "
-            f"{self.gap_s:.1f} s ({self.rejected} turned away by the gate, {self.missed} "
-            f"unanswered); heading error {self.heading_from_deg:.1f} deg where it began, "
-            f"{self.heading_deg:.1f} a second before"
+            f"{self.time_s:.1f} s: {last}; {self.stretch}"
         )
 
 
@@ -306,20 +338,19 @@ def stretch_context(
     time_s: NDArray,
     heading_deg: NDArray,
     window: tuple[float, float],
-) -> tuple[float, int, int, int, float, float]:
-    """Before a failure at ``window``'s end: the longest stretch of the window with no answer
-    fused (s; ``fused_s``, ``rejected_s``: when each answer fused, or turned away by the gate,
-    arrived), the answers the gate turned away in that stretch, the queries unanswered in it and
-    how many of them a ``min_inliers`` turned away (their reason says so), and the filter's
-    heading error (deg; ``heading_deg`` at each step of ``time_s``) where the stretch began and a
-    second before the failure."""
+) -> Stretch:
+    """Before a failure at ``window``'s end, the longest stretch of the window with no answer
+    fused (``fused_s``, ``rejected_s``: when each answer fused, or turned away by the gate,
+    arrived; ``unanswered``: the queries with no answer, their reasons say which a
+    ``min_inliers`` turned away; ``heading_deg``: the filter's heading error at each step of
+    ``time_s``)."""
     edges = np.concatenate([[window[0]], np.sort(fused_s[in_window(fused_s, window)]), [window[1]]])
     longest = int(np.diff(edges).argmax())
     stretch = (edges[longest], edges[longest + 1])
     missed = in_window(unanswered["time_s"] + unanswered["latency_s"], stretch)
     floored = sum("inliers (<" in str(r) for r in unanswered["reason"][missed])
     at = [max(int(np.searchsorted(time_s, s)) - 1, 0) for s in (stretch[0], window[1] - 1.0)]
-    return (
+    return Stretch(
         float(np.diff(stretch)[0]),
         int(in_window(rejected_s, stretch).sum()),
         int(missed.sum()),

@@ -22,7 +22,7 @@ def stored_episodes(
         stored, rows = read_latest_run(output_dir)
         return plan_from_stored(stored), rows
     plan = experiment if isinstance(experiment, ExperimentPlan) else load_experiment(experiment)
-    keys = plan.setups_by_key  # every episode key of the plan, computed once
+    keys = plan.cells_by_key  # every episode key of the plan, computed once
     rows = [r for r in read_episodes(output_dir) if r.key in keys]
     if not rows:
         raise StoreError(f"{output_dir} holds no episode of experiment {plan.name!r}")
