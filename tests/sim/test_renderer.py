@@ -190,8 +190,17 @@ def test_lit_windows_follow_their_share(small_sim):
         )
         for s in (0.0, 0.3, 1.0)
     )
-    warm = [((i[..., 0].astype(int) - i[..., 2]) > 15).mean() for i in (none, some, every)]
+    # windows: false, a town whose buildings have no lights: no window lit, none black glass
+    bare = night_image(
+        small_sim,
+        camera,
+        StreetLights(mode="on", lamp_illuminance=0.0, window_share=1.0, windows=False),
+    )
+    warm = [((i[..., 0].astype(int) - i[..., 2]) > 15).mean() for i in (none, some, every, bare)]
     assert warm[0] < 0.001 < warm[1] < warm[2], warm  # warm light in a share of the windows
+    assert warm[3] < 0.001, warm
+    black = (none.max(axis=2) == 0).mean(), (bare.max(axis=2) == 0).mean()
+    assert black[1] < 0.1 * black[0], black  # the windows show what they show by day, dimly
 
 
 def test_street_lights_bad_input_names_the_field():
@@ -201,6 +210,8 @@ def test_street_lights_bad_input_names_the_field():
         StreetLights(window_share=1.5)
     with pytest.raises(ConfigError, match=r"street_lights\.lamp_illuminance"):
         StreetLights(lamp_illuminance=-1.0)
+    with pytest.raises(ConfigError, match=r"street_lights\.windows"):
+        StreetLights(windows="no")  # type: ignore[arg-type]
 
 
 def test_sun_shadows_darken_what_the_sun_cannot_reach_and_keep_the_skylight(small_sim):

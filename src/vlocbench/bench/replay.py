@@ -13,7 +13,7 @@ from typing import Any
 from vlocbench.bench.towns import town_named
 from vlocbench.config import from_dict
 from vlocbench.interfaces import Image
-from vlocbench.sim import Simulator
+from vlocbench.sim import Frame, Simulator
 from vlocbench.sim.camera import Camera
 from vlocbench.sim.conditions import Conditions
 
@@ -37,10 +37,15 @@ class QueryRenderer:
         self.camera = episode_camera(config)
         self.sim = Simulator(town_named(config["town"]), static)
 
-    def image(self, x_m: float, y_m: float, yaw_rad: float, time_s: float) -> Image:
-        """(H, W, 3) uint8 RGB with the car at (x, y, yaw) and the episode's noise at ``time_s``."""
+    def frame(self, x_m: float, y_m: float, yaw_rad: float, time_s: float) -> Frame:
+        """The camera's frame with the car at (x, y, yaw) and the episode's noise at ``time_s``:
+        its image and the camera's true pose."""
         self.sim.teleport(float(x_m), float(y_m), float(yaw_rad))
-        return self.sim.render([self.camera], frame_id=round(time_s / self.sim.dt_s))[0].image
+        return self.sim.render([self.camera], frame_id=round(time_s / self.sim.dt_s))[0]
+
+    def image(self, x_m: float, y_m: float, yaw_rad: float, time_s: float) -> Image:
+        """(H, W, 3) uint8 RGB of :meth:`frame`."""
+        return self.frame(x_m, y_m, yaw_rad, time_s).image
 
     def close(self) -> None:
         self.sim.close()

@@ -193,8 +193,11 @@ class StreetLights:
     falls below ``switch_on_below``, a photocell's threshold (3e-4: about 30 lx of noon's
     100 klx; k >= 8 on the paper's scale). ``lamp_illuminance`` is the light on the road under a
     lamp (2e-4: 20 lx, a residential street's), ``window_luminance`` that of a lit window
-    (6e-4: about 20 cd/m2) and ``window_share`` the share of windows lit. CARLA decides its switch
-    in a Blueprint, not in its source, so the threshold is a photocell's, not read from CARLA.
+    (6e-4: about 20 cd/m2) and ``window_share`` the share of windows lit; the others are black
+    glass, over whatever the window shows by day (panes, mullions, blinds). ``windows: false``
+    leaves every window as by day, lit by the night like the walls: a town whose buildings have
+    no lights (the lamps alone). CARLA decides its switch in a Blueprint, not in its source, so
+    the threshold is a photocell's, not read from CARLA.
     """
 
     mode: StreetLightMode = "auto"
@@ -202,9 +205,15 @@ class StreetLights:
     lamp_illuminance: float = 2e-4
     window_luminance: float = 6e-4
     window_share: float = 0.3
+    windows: bool = field(default=True, metadata=ADDED_OPTION)
 
     def __post_init__(self) -> None:
         require_one_of(self.mode, STREET_LIGHT_MODES, "street_lights.mode")
+        require(
+            isinstance(self.windows, bool),
+            "street_lights.windows",
+            f"must be true or false, got {self.windows!r}",
+        )
         for name in ("switch_on_below", "lamp_illuminance", "window_luminance"):
             v = getattr(self, name)
             require(

@@ -35,6 +35,7 @@ from vlocbench.sim.scene import (
     GROUP_FOLIAGE_SPARSE,
     LAMP_HEIGHT_M,
     LAMP_REACH_M,
+    NIGHT_MESHES,
     NIGHT_PARKED_Z_M,
     SKY_SIZE,
     TownScene,
@@ -175,8 +176,12 @@ class Renderer:
         white surface at noon displays 1)."""
         m, sc, sl = self.scene.model, self.scene, c.street_lights
         self.street_lights_on = sl.on(daylight_share)
-        for gid, z in zip(sc.night_geom_ids, self._night_z, strict=True):
-            m.geom_pos[gid, 2] = z if self.street_lights_on else z + NIGHT_PARKED_Z_M
+        shown = {
+            "lamp_glow": self.street_lights_on,
+            "windows_lit": self.street_lights_on and sl.windows,
+        }
+        for name, gid, z in zip(NIGHT_MESHES, sc.night_geom_ids, self._night_z, strict=True):
+            m.geom_pos[gid, 2] = z if shown[name] else z + NIGHT_PARKED_Z_M
         # under a lamp, the road's white would display this (a point light, 1/d in display
         # values: about 1/d^2 through the camera's gamma)
         self.lamp_level = (sl.lamp_illuminance * self.gain) ** (1 / DISPLAY_GAMMA)
