@@ -199,8 +199,8 @@ def main() -> None:
                 if where.any()
             ]
             print(f"  {name}: {int(where.sum())} | " + " | ".join(cells))
-        wrong_fused = np.flatnonzero(~a["right"] & a["fused"])
-        if 0 < len(wrong_fused) <= MAX_LISTED:
+        listed = np.flatnonzero(~a["right"] & a["fused"])
+        if 0 < len(listed) <= MAX_LISTED:
             print(
                 "  the wrong answers fused (repetition, the car's true x, y m: error m / deg, "
                 "inliers): "
@@ -208,7 +208,7 @@ def main() -> None:
                     f"{a['repetition'][i]:.0f}, ({a['x_m'][i]:.0f}, {a['y_m'][i]:.0f}): "
                     f"{a['error_m'][i]:.2f} / "
                     f"{a['error_deg'][i]:.1f}, {a['inliers'][i]:.0f}"
-                    for i in wrong_fused
+                    for i in listed
                 )
             )
         # a wrong answer fused in the window (start, end] is one less than window_s before

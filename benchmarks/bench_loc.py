@@ -105,7 +105,8 @@ def main() -> None:
         localizer = MapLocalizer(map_dir, loc_config)
         model = camera_model(cam)
         idx = np.linspace(5, len(path) - 5, args.speed_queries + 1).astype(int)
-        totals, stages = [], {}
+        totals: list[float] = []
+        stages: dict[str, list[float]] = {}
         for n, j in enumerate(idx):
             sim.teleport(float(path.xy[j, 0]), float(path.xy[j, 1]), float(path.yaw_rad[j]))
             image = sim.render([cam])[0].image
@@ -114,8 +115,8 @@ def main() -> None:
             if n == 0:
                 continue  # warm-up
             totals.append(time.perf_counter() - t)
-            for k, v in result.seconds.items():
-                stages.setdefault(k, []).append(v)
+            for stage, v in result.seconds.items():
+                stages.setdefault(stage, []).append(v)
         sim.close()
         print(
             f"  speed at k={args.speed_k:g}, 800x600: median {1000 * statistics.median(totals):.0f} ms "

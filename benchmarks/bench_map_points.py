@@ -137,8 +137,11 @@ def main() -> None:
                 frames = tuple(sim.render([camera]))
                 for key, localizer in localizers.items():
                     e = localizer.localize(LocalizationQuery(0.0, frames, truth))
-                    ok = e.success and e.world_from_vehicle is not None
-                    err = pose_error(truth, e.world_from_vehicle) if ok else (np.nan, np.nan)
+                    err = (
+                        pose_error(truth, e.world_from_vehicle)
+                        if e.success and e.world_from_vehicle is not None
+                        else (np.nan, np.nan)
+                    )
                     errors[key].append(err)
         print(f"{args.queries} queries at noon | T1 / T2 / T3 (%) | wrong (%)")
         for key, errs in errors.items():

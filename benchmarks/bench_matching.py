@@ -20,6 +20,7 @@ from collections.abc import Callable
 
 from vlocbench.bench.experiment import load_experiment
 from vlocbench.bench.preparation import prepare_gallery
+from vlocbench.loc.learned import LightGlueMatcher
 from vlocbench.loc.registry import build_features, build_matcher
 
 
@@ -42,6 +43,8 @@ def main() -> None:
     ]
     pairs = [(feats[k], feats[k + 1]) for k in range(args.pairs)]
     matcher = build_matcher(args.matcher)
+    if not isinstance(matcher, LightGlueMatcher):
+        raise SystemExit(f"{args.matcher} is not a LightGlue-type matcher")
     print(f"{args.matcher} on {matcher.device}, keypoints {sorted({len(f) for f in feats})}")
 
     def batched(size: int, prune: bool) -> Callable[[], object]:

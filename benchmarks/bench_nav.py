@@ -72,7 +72,7 @@ def main() -> None:
         poses = np.stack([tr.true_x_m, tr.true_y_m, tr.true_yaw_rad], axis=1)
         dt = sim.dt_s
         speeds = np.hypot(np.diff(tr.true_x_m), np.diff(tr.true_y_m)) / dt
-        yaw_rates = wrap_angle(np.diff(tr.true_yaw_rad)) / dt
+        yaw_rates = np.asarray(wrap_angle(np.diff(tr.true_yaw_rad))) / dt
         drifts = [
             dead_reckoning_drift(poses, speeds, yaw_rates, dt, WheelOdometry(seed=s))
             for s in range(20)

@@ -67,7 +67,7 @@ def stored_cut_parser(setup_help: str, many: bool = False) -> argparse.ArgumentP
     ap.add_argument("--experiment", type=Path, required=True)
     ap.add_argument("--town", required=True)
     ap.add_argument("--method", required=True)
-    ap.add_argument("--setup", required=True, help=setup_help, action="append" if many else None)
+    ap.add_argument("--setup", required=True, help=setup_help, action="append" if many else "store")
     ap.add_argument("--store", type=Path, help="default: the experiment's output")
     return ap
 

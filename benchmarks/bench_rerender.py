@@ -43,6 +43,8 @@ from vlocbench.geometry import invert_pose, pose_error
 from vlocbench.loc.localizer import MapLocalizer
 from vlocbench.sim.conditions import Conditions
 
+Case = tuple[EpisodeTask, dict[str, Any], dict[str, NDArray], int]  # drive, config, answers, which
+
 
 def parse_variant(text: str) -> dict[str, Any]:
     """``"street_lights.mode=off; illumination.k=0"`` as {dotted field: value}."""
@@ -115,7 +117,7 @@ def main() -> None:
     plan = load_experiment(args.experiment).only([args.town], [args.method], setups=args.setup)
     store = args.store or plan.output_dir
     stored = {r.key: r for r in read_episodes(store) if r.metrics is not None}
-    cases: list[tuple[EpisodeTask, dict[str, Any], dict[str, NDArray], int]] = []
+    cases: list[Case] = []
     for task in plan.tasks():
         if task.kind == "failure" and task.key in stored:
             answers = read_episode_table(store, task.key, "localizations")
@@ -129,42 +131,13 @@ def main() -> None:
             from_dict(Conditions, with_conditions(cases[0][1], changes)["setup"]["conditions"])
         except ConfigError as exc:
             raise SystemExit(f"--set {text!r}: {exc}") from None
-    localizer = MapLocalizer(cases[0][1]["map_dir"], cases[0][0].method.localizer)
-    columns: dict[str, list[tuple[float, float, int]]] = {}
-    for k, (name, changes) in enumerate([("again", {}), *variants.items()]):
-        column = columns[name] = []
-        renderers: dict[str, QueryRenderer] = {}  # one scene per town, conditions and camera
-        for _, config, answers, i in cases:
-            config = with_conditions(config, changes)
-            same = json.dumps([config["town"], config["setup"]], sort_keys=True)
-            if same not in renderers:
-                renderers[same] = QueryRenderer(config)
-            renderer = renderers[same]
-            frame = renderer.frame(
-                answers["true_x_m"][i],
-                answers["true_y_m"][i],
-                answers["true_yaw_rad"][i],
-                answers["time_s"][i],
-            )
-            if args.images is not None:
-                args.images.mkdir(parents=True, exist_ok=True)
-                tag = f"set{k}" if k else "again"
-                PILImage.fromarray(frame.image).save(
-                    args.images / f"answer{len(column):02d}_{tag}.png"
-                )
-            result = localizer.localize(frame.image, camera_model(renderer.camera))
-            if result.world_from_cam is None:
-                column.append((np.inf, np.inf, 0))
-            else:
-                # the vehicle's pose, as the episode scores its answers
-                cam_from_vehicle = invert_pose(renderer.camera.extrinsics.vehicle_from_cam())
-                error = pose_error(
-                    frame.world_from_cam @ cam_from_vehicle,
-                    result.world_from_cam @ cam_from_vehicle,
-                )
-                column.append((*error, result.num_inliers))
-        for renderer in renderers.values():
-            renderer.close()
+    method = cases[0][0].method
+    assert method is not None  # a failure drive's
+    localizer = MapLocalizer(cases[0][1]["map_dir"], method.localizer)
+    columns = {
+        name: localize_again(cases, changes, localizer, args.images, f"set{k}" if k else "again")
+        for k, (name, changes) in enumerate([("again", {}), *variants.items()])
+    }
     print(
         f"{args.town}, {args.method}: {len(cases)} wrong answers; each column: error m / deg, "
         f"inliers; {', '.join(f'[{k + 1}] {v}' for k, v in enumerate(variants))}"
@@ -185,6 +158,47 @@ def main() -> None:
         right = np.isfinite(errors[:, 0]) & ~wrong_answers(errors[:, 0], errors[:, 1])
         label = "rendered again" if k == 0 else f"[{k}] {name}"
         print(f"  {label}: {int(right.sum())} of {len(cases)} right")
+
+
+def localize_again(
+    cases: list[Case],
+    changes: dict[str, Any],
+    localizer: MapLocalizer,
+    images: Path | None,
+    tag: str,
+) -> list[tuple[float, float, int]]:
+    """Each case's query rendered under its conditions with ``changes`` and localized: the
+    vehicle's position (m) and rotation (deg) error, as the episode scores its answers, and the
+    inliers (inf, inf, 0: no answer). ``images``: where to write each query as answerNN_tag.png."""
+    out: list[tuple[float, float, int]] = []
+    renderers: dict[str, QueryRenderer] = {}  # one scene per town, conditions and camera
+    for _, config, answers, i in cases:
+        config = with_conditions(config, changes)
+        same = json.dumps([config["town"], config["setup"]], sort_keys=True)
+        if same not in renderers:
+            renderers[same] = QueryRenderer(config)
+        renderer = renderers[same]
+        frame = renderer.frame(
+            answers["true_x_m"][i],
+            answers["true_y_m"][i],
+            answers["true_yaw_rad"][i],
+            answers["time_s"][i],
+        )
+        if images is not None:
+            images.mkdir(parents=True, exist_ok=True)
+            PILImage.fromarray(frame.image).save(images / f"answer{len(out):02d}_{tag}.png")
+        result = localizer.localize(frame.image, camera_model(renderer.camera))
+        if result.world_from_cam is None:
+            out.append((np.inf, np.inf, 0))
+            continue
+        cam_from_vehicle = invert_pose(renderer.camera.extrinsics.vehicle_from_cam())
+        error = pose_error(
+            frame.world_from_cam @ cam_from_vehicle, result.world_from_cam @ cam_from_vehicle
+        )
+        out.append((*error, result.num_inliers))
+    for renderer in renderers.values():
+        renderer.close()
+    return out
 
 
 def cell(error_m: float, error_deg: float, inliers: int) -> str:

@@ -114,7 +114,7 @@ def ekf_nees(trajectory: Mapping[str, Array]) -> Array:
     return nees(errors, upper_to_full(upper))
 
 
-def stored_covariances(column: Sequence[Sequence[float]], default: Array) -> Array:
+def stored_covariances(column: Sequence[Sequence[float]] | Array, default: Array) -> Array:
     """(N, 3, 3) a localization table's ``covariance`` column (N,), each answer's own row-major
     (x, y, yaw) covariance where it carries one, else ``default`` (3, 3)."""
     return np.array([np.reshape(c, (3, 3)) if len(c) == 9 else default for c in column]).reshape(

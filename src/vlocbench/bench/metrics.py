@@ -63,7 +63,7 @@ def recall(
 
 
 def place_recall(
-    retrieval_distances_m: Sequence[Sequence[float]],
+    retrieval_distances_m: Sequence[Sequence[float] | NDArray[np.float64]],
     ranks: Sequence[int] = PLACE_RANKS,
     radii_m: Sequence[float] = PLACE_RADII_M,
 ) -> tuple[float, ...]:

@@ -32,7 +32,7 @@ from vlocbench.sim.roads import RoadLayout, build_route
 from vlocbench.sim.town import ROUTE_LENGTH_TOLERANCE, RoadSpec, TownSpec, road_layout
 
 Style = Literal["town", "city"]
-STYLES: tuple[str, ...] = get_args(Style)
+STYLES: tuple[Style, ...] = get_args(Style)
 HIDDEN_SEED_ENV = "VLOCBENCH_HIDDEN_SEED"
 HIDDEN_SEED_FILE_ENV = "VLOCBENCH_HIDDEN_SEED_FILE"
 # a shorter seed could be found from its digest by trying every candidate
