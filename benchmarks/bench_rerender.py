@@ -5,10 +5,11 @@ with the map, under the stored conditions and under changed ones.
         --town town01 --method xfeat-lighterglue --setup k=9 --setup k=10 --near 395,-1
         --set street_lights.mode=off --set street_lights.windows=false --set illumination.k=0
 
-Reads the stored failure drives of one town and method at each setup (the present plan's keys),
-and takes the answers that were wrong (beyond (5 m, 10 deg), 6-DoF, the confident-wrong
-threshold), those within ``--radius-m`` of ``--near`` (x, y m, the car's true position) or, without
-it, the ones the filter fused (at most ``--max``). Each is rendered again as the drive saw it (the
+Reads the stored failure drives (``--kind recall``: the ground-truth drive) of one town and method
+at each setup (the present plan's keys), and takes the answers that were wrong (beyond (5 m, 10
+deg), 6-DoF, the confident-wrong threshold), those within ``--radius-m`` of ``--near`` (x, y m, the
+car's true position) or, without it, the ones the filter fused (the ground-truth drive: every
+wrong one), at most ``--max``. Each is rendered again as the drive saw it (the
 episode's scene, light, weather and sensor noise; no traffic) and localized with the method's
 map and localizer: the first column says whether the stored answer comes back (it should, to
 the inlier: rendering and localization are deterministic; errors are the vehicle's pose's, as
@@ -85,14 +86,18 @@ def with_conditions(config: dict[str, Any], changes: dict[str, Any]) -> dict[str
 
 
 def chosen_answers(
-    answers: dict[str, NDArray], near: tuple[float, float] | None, radius_m: float
+    answers: dict[str, NDArray],
+    near: tuple[float, float] | None,
+    radius_m: float,
+    fused_only: bool,
 ) -> NDArray[np.int64]:
-    """The wrong answers near ``near`` (the car's true x, y), or the wrong ones fused."""
+    """The wrong answers near ``near`` (the car's true x, y), or the wrong ones (``fused_only``:
+    those the filter fused)."""
     wrong = answers["success"].astype(bool) & wrong_answers(
         answers["position_error_3d_m"], answers["rotation_error_deg"]
     )
     if near is None:
-        return np.flatnonzero(wrong & answers["fused"].astype(bool))
+        return np.flatnonzero(wrong & answers["fused"].astype(bool) if fused_only else wrong)
     d = np.hypot(answers["true_x_m"] - near[0], answers["true_y_m"] - near[1])
     return np.flatnonzero(wrong & (d <= radius_m))
 
@@ -101,6 +106,7 @@ def main() -> None:
     ap = stored_cut_parser("a label of the sweep, e.g. k=8; again for more", many=True)
     ap.add_argument("--near", help="x,y (m): the wrong answers with the car within --radius-m")
     ap.add_argument("--radius-m", type=float, default=6.0)
+    ap.add_argument("--kind", choices=("failure", "recall"), default="failure")
     ap.add_argument("--max", type=int, default=20, help="at most this many answers")
     ap.add_argument("--images", type=Path, help="write each rendered query here (PNG)")
     ap.add_argument(
@@ -119,9 +125,9 @@ def main() -> None:
     stored = {r.key: r for r in read_episodes(store) if r.metrics is not None}
     cases: list[Case] = []
     for task in plan.tasks():
-        if task.kind == "failure" and task.key in stored:
+        if task.kind == args.kind and task.key in stored:
             answers = read_episode_table(store, task.key, "localizations")
-            for i in chosen_answers(answers, near, args.radius_m):
+            for i in chosen_answers(answers, near, args.radius_m, args.kind == "failure"):
                 cases.append((task, stored[task.key].config, answers, int(i)))
     if not cases:
         raise SystemExit("no wrong answer stored there")
@@ -132,7 +138,7 @@ def main() -> None:
         except ConfigError as exc:
             raise SystemExit(f"--set {text!r}: {exc}") from None
     method = cases[0][0].method
-    assert method is not None  # a failure drive's
+    assert method is not None  # a method's drive
     localizer = MapLocalizer(cases[0][1]["map_dir"], method.localizer)
     columns = {
         name: localize_again(cases, changes, localizer, args.images, f"set{k}" if k else "again")
