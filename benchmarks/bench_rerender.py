@@ -28,12 +28,12 @@ import json
 from pathlib import Path
 from typing import Any
 
+import cv2
 import numpy as np
 from numpy.typing import NDArray
-from PIL import Image as PILImage
 
 from bench_off_line import stored_cut_parser
-from vlocbench.bench.experiment import EpisodeTask, load_experiment
+from vlocbench.bench.experiment import EpisodeTask, load_experiment, set_dotted
 from vlocbench.bench.metrics import wrong_answers
 from vlocbench.bench.replay import QueryRenderer
 from vlocbench.bench.store import read_episode_table, read_episodes
@@ -72,16 +72,8 @@ def scalar(text: str) -> Any:
 def with_conditions(config: dict[str, Any], changes: dict[str, Any]) -> dict[str, Any]:
     """A copy of a stored episode ``config`` with its conditions' dotted fields changed."""
     out = copy.deepcopy(config)
-    for field, value in changes.items():
-        *path, last = field.split(".")
-        node = out["setup"]["conditions"]
-        for part in path:
-            if not isinstance(node.get(part), dict):
-                raise ConfigError(
-                    f"--set {field}", f"the conditions have no group {part!r}: {sorted(node)}"
-                )
-            node = node[part]
-        node[last] = value  # a field the store left out at its default too; Conditions checks it
+    for field, value in changes.items():  # Conditions checks the names when it is built
+        set_dotted(out["setup"]["conditions"], field, value, f"--set {field}")
     return out
 
 
@@ -116,9 +108,12 @@ def main() -> None:
         help="a variant of the conditions: field=value[; field=value], e.g. street_lights.mode=off",
     )
     args = ap.parse_args()
-    near = tuple(float(v) for v in args.near.split(",")) if args.near else None
+    try:
+        near = tuple(float(v) for v in args.near.split(",")) if args.near else None
+    except ValueError:
+        near = ()
     if near is not None and len(near) != 2:
-        raise SystemExit("--near takes x,y")
+        raise SystemExit(f"--near takes x,y in metres, got {args.near!r}")
     variants = {text: parse_variant(text) for text in args.set}
     plan = load_experiment(args.experiment).only([args.town], [args.method], setups=args.setup)
     store = args.store or plan.output_dir
@@ -192,7 +187,8 @@ def localize_again(
         )
         if images is not None:
             images.mkdir(parents=True, exist_ok=True)
-            PILImage.fromarray(frame.image).save(images / f"answer{len(out):02d}_{tag}.png")
+            bgr = cv2.cvtColor(frame.image, cv2.COLOR_RGB2BGR)
+            cv2.imwrite(str(images / f"answer{len(out):02d}_{tag}.png"), bgr)
         result = localizer.localize(frame.image, camera_model(renderer.camera))
         if result.world_from_cam is None:
             out.append((np.inf, np.inf, 0))

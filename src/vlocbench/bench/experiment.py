@@ -478,12 +478,14 @@ def plan_from_stored(data: dict[str, Any]) -> ExperimentPlan:
     return load_experiment({**data, "sweep": {k: v for k, v in data.get("sweep", [])}})
 
 
-def _set(tree: dict[str, Any], dotted: str, value: Any) -> None:
+def set_dotted(tree: dict[str, Any], dotted: str, value: Any, name: str) -> None:
+    """Set ``tree``'s field at the dotted path ``dotted`` (groups made as needed; a dict value
+    updates a dict there); ``name`` is what an error calls it."""
     *parents, leaf = dotted.split(".")
     for p in parents:
         node = tree.setdefault(p, {})
         if not isinstance(node, dict):
-            raise ConfigError(f"sweep.{dotted}", f"{p} is set to a value and also has sub-keys")
+            raise ConfigError(name, f"{p} is set to a value and also has sub-keys")
         tree = node
     if isinstance(value, dict) and isinstance(tree.get(leaf), dict):
         tree[leaf].update(value)
@@ -611,7 +613,7 @@ def _resolve_setups(spec: ExperimentSpec, sweep: list[tuple[str, list[Any]]]) ->
     for combo in itertools.product(*(levels for _, levels in sweep)):
         tree: dict[str, Any] = {}
         for (key, _), value in zip(sweep, combo):
-            _set(tree, key, copy.deepcopy(value))
+            set_dotted(tree, key, copy.deepcopy(value), f"sweep.{key}")
         episode = _episode(spec.episode, tree.pop("episode", None))
         methods = _methods(spec, tree.pop("methods", None))
         cameras = _cameras(spec.gallery.camera, tree.pop("cameras", None), tree.pop("camera", None))
