@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
 import tempfile
 
 import pytest
@@ -89,6 +91,19 @@ def query_pose(stretch, index, forward_m=1.0, left_m=0.3, yaw_rad=0.02):
     xy = stretch.xy[index] + forward_m * np.array([np.cos(yaw), np.sin(yaw)])
     xy += left_m * np.array([-np.sin(yaw), np.cos(yaw)])
     return float(xy[0]), float(xy[1]), yaw + yaw_rad
+
+
+def last_line_in_a_process(code: str, **env: str) -> str:
+    """The last line ``python -c code`` prints in a fresh process with ``env`` added."""
+    run = subprocess.run(
+        [sys.executable, "-c", code],
+        env={**os.environ, **env},
+        capture_output=True,
+        text=True,
+        check=True,
+        timeout=120,
+    )
+    return run.stdout.strip().splitlines()[-1]
 
 
 def call_behind_build_lock(folder, call, while_held=lambda: None, wait_s=1.0):

@@ -212,6 +212,7 @@ def test_cli_run_and_report_errors(tiny, tmp_path, capsys):
     out = capsys.readouterr().out
     assert "index.html" in out
     assert "small:\n| method | k=0 | k=6 |" in out  # the failure table, as a run prints it
+    assert "episodes computed on one platform: 5 on " in out
     assert os.path.exists(root / "out" / "report" / "tables.md")
     # a part of the run again (all done: only its report), in a copy of the store
     shutil.copytree(root / "out", tmp_path / "copy")

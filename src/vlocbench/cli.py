@@ -226,6 +226,8 @@ def _run(args: argparse.Namespace) -> int:
         return 1 if summary.errors else 0
     files = write_report(plan.output_dir, examples=not args.no_examples)
     print("\n".join(summary_lines(files.summary)))
+    if files.platforms:
+        print(files.platforms)
     print(f"report: {files.html.resolve()}")
     if args.towns or args.methods or args.kinds or args.setup or args.repetitions:
         print(
@@ -326,8 +328,9 @@ def _report(args: argparse.Namespace) -> int:
     print(
         f"{files.summary.episodes} of the {files.summary.planned} episodes of {files.summary.plan.name}"
     )
-    if line := not_stored_line(files.summary):
-        print(line)
+    for line in (not_stored_line(files.summary), files.platforms):
+        if line:
+            print(line)
     if args.experiment:
         # after a changed setting or definition (new keys) the older episodes stay in the store
         others = count_episodes(args.output) - files.summary.episodes

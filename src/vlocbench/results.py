@@ -26,7 +26,18 @@ from vlocbench.bench.runs import Experiment, stored_episodes
 from vlocbench.bench.store import EpisodeRow, read_episode_table
 
 # the columns of each row before its levels and metrics
-ID_COLUMNS = ("key", "kind", "town", "method", "setup", "repetition", "seed", "status", "error")
+ID_COLUMNS = (
+    "key",
+    "kind",
+    "town",
+    "method",
+    "setup",
+    "repetition",
+    "seed",
+    "status",
+    "error",
+    "platform",
+)
 _RECALL = [f"{m:g}m_{d:g}deg" for m, d in RECALL_THRESHOLDS]
 # tuple metrics spread over named columns, e.g. recall_0.25m_2deg, place_recall_at5_10m
 _SPREAD = {

@@ -1,5 +1,8 @@
 """Reports: a real run's page, and a sweep stored in parts reported whole."""
 
+import dataclasses
+import html
+
 import yaml
 
 from tests.bench.fakes import ILL_SPEC, run_fake_plans
@@ -7,7 +10,8 @@ from vlocbench.bench.experiment import load_experiment
 
 
 def test_report_of_a_run(tiny):
-    from vlocbench.bench.report import write_report
+    from vlocbench.bench.platform import current_platform
+    from vlocbench.bench.report import platforms_line, write_report
 
     root, _ = tiny
     files = write_report(root / "out")
@@ -29,6 +33,17 @@ def test_report_of_a_run(tiny):
     assert page.count("data:image/png;base64,") == 5
     assert page.count("data:image/jpeg;base64,") == 4  # query and gallery view per setup
     assert 'src="http' not in page  # self-contained
+    # which platform drew and computed the episodes; a warning where a store mixes several
+    here = current_platform()
+    assert files.platforms.startswith(f"episodes computed on one platform: 5 on {here.id} (")
+    assert here.details["gl_renderer"] in files.platforms and html.escape(files.platforms) in page
+    mixed = dataclasses.replace(files.summary, platforms={here.id: 3, "0123456789ab": 1, None: 1})
+    line = platforms_line(mixed, {here.id: here.to_dict()})
+    assert line.startswith("WARNING: episodes computed on 2 platforms")
+    assert line.endswith(
+        f"3 on {files.platforms.split(' on ', 2)[2]}; 1 on 0123456789ab (?; ?); "
+        "1 stored before platforms were recorded"
+    )
 
 
 def test_a_sweep_run_in_parts_is_reported_whole(tmp_path, capsys):

@@ -1,13 +1,15 @@
 """A real experiment end to end (gallery, map, episodes, store), resumed, and the gallery cache check."""
 
+import json
 import sqlite3
 from pathlib import Path
 
 import pytest
 
 from vlocbench.bench.experiment import load_experiment
+from vlocbench.bench.platform import current_platform
 from vlocbench.bench.runner import run_experiment
-from vlocbench.bench.store import DB_FILE, ResultStore
+from vlocbench.bench.store import DB_FILE, ResultStore, read_platforms
 
 
 def test_experiment_runs_end_to_end_and_resumes(tiny):
@@ -22,6 +24,11 @@ def test_experiment_runs_end_to_end_and_resumes(tiny):
     )
     with ResultStore(root / "out", "tiny") as store:
         rows = store.rows()
+    # each episode names the platform it ran on: this machine's, as this process computes it
+    # (the workers' one thread each changes no digest), its record stored once
+    here = current_platform()
+    assert {r.platform for r in rows} == {here.id}
+    assert read_platforms(root / "out") == {here.id: json.loads(json.dumps(here.to_dict()))}
     recall = [r for r in rows if r.kind == "recall"]
     assert len(recall) == 2 and all(r.metrics.queries > 10 for r in recall)
     assert all(r.metrics.recall[3] > 0.5 for r in recall)  # it localizes on its own map

@@ -13,7 +13,15 @@ import pytest
 
 from tests.bench.fakes import synthetic_result
 from vlocbench.bench.metrics import episode_metrics
-from vlocbench.bench.store import DB_FILE, EpisodeRow, ResultStore, StoreError
+from vlocbench.bench.platform import Platform
+from vlocbench.bench.store import (
+    DB_FILE,
+    EpisodeRow,
+    ResultStore,
+    StoreError,
+    read_latest_run,
+    read_platforms,
+)
 
 
 def _row(key, status="ok"):
@@ -80,6 +88,36 @@ def test_rows_stored_with_nan_before_strict_json_are_rewritten_on_open(tmp_path)
             ('{"name": "exp", "x": null}',)
         ]
         assert np.isnan(store.rows()[0].metrics.ct_mean_s)
+
+
+def _platform(render):
+    packages = {"mujoco": "4.0.1"}
+    return Platform(render, "n" * 16, "", packages, {"gl_renderer": "llvmpipe", "cpu": "x"})
+
+
+def test_each_episode_names_its_platform_and_a_store_from_before_takes_the_column(tmp_path):
+    a, b = _platform("r" * 16), _platform("s" * 16)
+    with ResultStore(tmp_path / "new", "exp") as store:
+        store.start_run("run1", {"name": "exp"}, ["a", "b", "c"])
+        store.write_episode(dataclasses.replace(_row("a"), platform=a.id), synthetic_result(1), a)
+        store.write_episode(dataclasses.replace(_row("b"), platform=a.id), synthetic_result(1), a)
+        store.write_episode(dataclasses.replace(_row("c"), platform=b.id), synthetic_result(1), b)
+    assert [r.platform for r in read_latest_run(tmp_path / "new")[1]] == [a.id, a.id, b.id]
+    assert read_platforms(tmp_path / "new") == {a.id: a.to_dict(), b.id: b.to_dict()}
+    # a store written before platforms were recorded: read as it is (none known), and a run
+    # that opens it adds the column, its old rows without a platform
+    old = tmp_path / "old"
+    with ResultStore(old, "exp") as store:
+        store.start_run("run1", {"name": "exp"}, ["a", "b"])
+        store.write_episode(_row("a"), synthetic_result(1))
+    with sqlite3.connect(old / DB_FILE) as db:
+        db.execute("DROP TABLE platforms")
+        db.execute("ALTER TABLE episodes DROP COLUMN platform")
+    assert read_platforms(old) == {} and read_latest_run(old)[1][0].platform is None
+    with ResultStore(old, "exp") as store:
+        store.write_episode(dataclasses.replace(_row("b"), platform=a.id), synthetic_result(1), a)
+        assert [r.platform for r in store.rows()] == [None, a.id]
+    assert read_platforms(old) == {a.id: a.to_dict()}
 
 
 def test_another_experiments_folder_and_a_busy_folder_are_refused(tmp_path):

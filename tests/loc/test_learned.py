@@ -5,7 +5,7 @@ import socket
 import numpy as np
 import pytest
 
-from tests.conftest import CAMERA, query_pose
+from tests.conftest import CAMERA, last_line_in_a_process, query_pose
 
 torch = pytest.importorskip("torch")
 
@@ -245,6 +245,23 @@ def test_the_device_is_auto_cpu_or_cuda(monkeypatch):
     if not torch.cuda.is_available():
         with pytest.raises(ConfigError, match="sees no GPU"):
             resolve_device("cuda")
+
+
+def test_the_compute_fingerprint_follows_the_cpus_kernels_not_the_process():
+    """A forward pass's rounding depends on the vector kernels PyTorch picks for the CPU: the
+    digest is the same in every process of a machine, another where other kernels run."""
+    from vlocbench.loc.learned import compute_fingerprint
+
+    code = (
+        "from vlocbench.loc.learned import compute_fingerprint; print(compute_fingerprint('cpu'))"
+    )
+
+    here = compute_fingerprint("cpu")
+    assert len(here) == 16 and last_line_in_a_process(code, OMP_NUM_THREADS="1") == here
+    capability = torch.backends.cpu.get_cpu_capability()
+    if capability == "DEFAULT":
+        pytest.skip("this CPU runs PyTorch's plain kernels: no other to compare with")
+    assert last_line_in_a_process(code, ATEN_CPU_CAPABILITY="default") != here
 
 
 def test_a_learned_maps_pairs_matched_in_a_pool_are_the_drivers_matches(

@@ -76,6 +76,7 @@ def _row(task: EpisodeTask, outcome: EpisodeOutcome, attempts: int) -> EpisodeRo
         metrics=episode_metrics(outcome.result) if outcome.result is not None else None,
         wall_s=outcome.wall_s if ok else None,
         attempts=attempts,
+        platform=outcome.platform.id if outcome.platform else None,
     )
 
 
@@ -98,7 +99,7 @@ class Recorder:
 
     def _write(self, task: EpisodeTask, outcome: EpisodeOutcome, attempts: int) -> None:
         t = time.perf_counter()
-        self.store.write_episode(_row(task, outcome, attempts), outcome.result)
+        self.store.write_episode(_row(task, outcome, attempts), outcome.result, outcome.platform)
         self.tally.store_s += time.perf_counter() - t
         if outcome.result is not None:
             self.tally.finished += 1

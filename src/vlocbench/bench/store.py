@@ -2,8 +2,9 @@
 folder; no server.
 
 - ``results.sqlite``: the experiment this folder belongs to, one row per run (a resolved spec and
-  its hash), one row per episode (its key, resolved config and hash, metrics or error), and which
-  episodes each run asked for.
+  its hash), one row per episode (its key, resolved config and hash, metrics or error, the id of
+  the platform it ran on), which episodes each run asked for, and each platform's record
+  (:mod:`vlocbench.bench.platform`).
 - ``episodes/KEY/trajectory.parquet`` (per simulation step: time, true pose, EKF pose, speed) and
   ``localizations.parquet`` (per query: estimate, truth, EKF pose, errors, compute time).
 
@@ -32,6 +33,7 @@ from typing import Any
 import numpy as np
 
 from vlocbench.bench.metrics import EpisodeMetrics
+from vlocbench.bench.platform import Platform
 from vlocbench.bench.records import EpisodeResult, localization_columns
 from vlocbench.config import config_hash
 from vlocbench.errors import MachineError, VlocbenchError
@@ -48,9 +50,10 @@ CREATE TABLE IF NOT EXISTS episodes (
     key TEXT PRIMARY KEY, kind TEXT NOT NULL, town TEXT NOT NULL, method TEXT NOT NULL,
     setup TEXT NOT NULL, repetition INTEGER NOT NULL, seed INTEGER NOT NULL,
     config TEXT NOT NULL, status TEXT NOT NULL, error TEXT, metrics TEXT,
-    wall_s REAL, attempts INTEGER NOT NULL, finished REAL NOT NULL);
+    wall_s REAL, attempts INTEGER NOT NULL, finished REAL NOT NULL, platform TEXT);
 CREATE TABLE IF NOT EXISTS run_episodes (
     run_hash TEXT NOT NULL, key TEXT NOT NULL, PRIMARY KEY (run_hash, key));
+CREATE TABLE IF NOT EXISTS platforms (id TEXT PRIMARY KEY, record TEXT NOT NULL);
 """
 
 
@@ -77,6 +80,7 @@ class EpisodeRow:
     metrics: EpisodeMetrics | None  # None: the episode ended in an error
     wall_s: float | None
     attempts: int
+    platform: str | None = None  # the id of the platform it ran on; None: not recorded (older)
 
 
 def run_hash(keys: Iterable[str]) -> str:
@@ -128,6 +132,7 @@ def _episode_row(
     wall_s: float | None,
     attempts: int,
     finished: float,
+    platform: str | None = None,  # a store written before platforms were recorded has no column
 ) -> EpisodeRow:
     """An ``episodes`` table row (its columns in schema order) as an EpisodeRow."""
     return EpisodeRow(
@@ -144,6 +149,7 @@ def _episode_row(
         metrics=EpisodeMetrics.from_stored(_nan_for_null(json.loads(metrics))) if metrics else None,
         wall_s=wall_s,
         attempts=attempts,
+        platform=platform,
     )
 
 
@@ -198,6 +204,15 @@ def read_episodes(output_dir: str | Path) -> list[EpisodeRow]:
     """Every stored episode, whichever run asked for it, by key."""
     with _read_only(output_dir) as db:
         return [_episode_row(*row) for row in db.execute("SELECT * FROM episodes ORDER BY key")]
+
+
+def read_platforms(output_dir: str | Path) -> dict[str, dict[str, Any]]:
+    """The record of each platform the store's episodes ran on (``Platform.to_dict``), by id."""
+    with _read_only(output_dir) as db:
+        tables = {n for (n,) in db.execute("SELECT name FROM sqlite_master WHERE type='table'")}
+        if "platforms" not in tables:  # written before platforms were recorded
+            return {}
+        return {i: json.loads(r) for i, r in db.execute("SELECT id, record FROM platforms")}
 
 
 def _columns(result: EpisodeResult) -> tuple[dict[str, Any], dict[str, Any]]:
@@ -256,6 +271,9 @@ class ResultStore:
             self.db.execute("PRAGMA journal_mode=WAL")
             self.db.execute("PRAGMA synchronous=FULL")
             self.db.executescript(_SCHEMA)
+            columns = {c for _, c, *_ in self.db.execute("PRAGMA table_info(episodes)")}
+            if "platform" not in columns:  # a store from before platforms were recorded
+                self.db.execute("ALTER TABLE episodes ADD COLUMN platform TEXT")
             row = self.db.execute("SELECT value FROM meta WHERE key='experiment'").fetchone()
         except sqlite3.DatabaseError as exc:
             self.close()
@@ -331,11 +349,18 @@ class ResultStore:
         self,
         row: EpisodeRow,
         result: EpisodeResult | None,
+        platform: Platform | None = None,
     ) -> None:
-        """Write one episode atomically (its tables first, then its row)."""
+        """Write one episode atomically (its tables first, then its row and its platform's
+        record, whose id ``row.platform`` names)."""
         if result is not None:
             self._write_tables(row.key, result)
         with self._transaction(f"episode {row.key}") as db:
+            if platform is not None:
+                db.execute(
+                    "INSERT OR IGNORE INTO platforms VALUES (?, ?)",
+                    (platform.id, strict_json(platform.to_dict())),
+                )
             columns = {
                 "key": row.key,
                 "kind": row.kind,
@@ -351,6 +376,7 @@ class ResultStore:
                 "wall_s": row.wall_s,
                 "attempts": row.attempts,
                 "finished": time.time(),
+                "platform": row.platform,
             }
             db.execute(
                 f"INSERT OR REPLACE INTO episodes ({', '.join(columns)}) "

@@ -8,7 +8,7 @@ share its key (the same traffic) share its cell.
 
 from __future__ import annotations
 
-from collections import defaultdict
+from collections import Counter, defaultdict
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -75,6 +75,8 @@ class Summary:
     errors: tuple[EpisodeRow, ...]
     episodes: int  # the episodes summarized, with errors or not
     planned: int  # the episodes the plan consists of (more than the above: a run not finished)
+    # episodes by the id of the platform they ran on (None: not recorded, stored before it was)
+    platforms: dict[str | None, int]
 
     @property
     def spec(self) -> ExperimentSpec:
@@ -208,4 +210,5 @@ def summarize(plan: ExperimentPlan, rows: Sequence[EpisodeRow]) -> Summary:
         errors=tuple(r for r in rows if r.status != "ok"),
         episodes=len(rows),
         planned=len(plan.tasks()),
+        platforms=dict(Counter(r.platform for r in rows)),
     )

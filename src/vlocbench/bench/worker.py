@@ -1,7 +1,8 @@
 """The worker side of a run: what a process executes for a job (:func:`run_job`: one episode, or
 the recall episodes of one setup on a shared drive), with the town's simulator and the last job's
-localizers kept per process, so that consecutive episodes skip the scene build and the map load;
-and how a pool worker starts (one thread each, ignoring Ctrl-C, stopping itself when its driver
+localizers kept per process, so that consecutive episodes skip the scene build and the map load,
+each outcome with the process's platform (:mod:`vlocbench.bench.platform`); and how a pool worker
+starts (one thread each, ignoring Ctrl-C, stopping itself when its driver
 dies)."""
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ import threading
 import time
 import traceback
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -20,6 +21,7 @@ from vlocbench.bench.episode import run_episode
 from vlocbench.bench.experiment import EpisodeTask
 from vlocbench.bench.localizer import Localizer
 from vlocbench.bench.methods import MethodContext, build_localizer
+from vlocbench.bench.platform import Platform, current_platform
 from vlocbench.bench.records import EpisodeResult
 from vlocbench.bench.shared_drive import can_share, run_shared_drive
 from vlocbench.bench.towns import route_named, town_named
@@ -35,6 +37,7 @@ class EpisodeOutcome:
     result: EpisodeResult | None
     wall_s: float  # in the worker: its share of the town's and its map's loading included
     error: str | None = None
+    platform: Platform | None = None  # where it ran (None: it never reached a worker)
 
 
 Job = tuple[EpisodeTask, ...]  # episodes a worker runs together
@@ -119,13 +122,19 @@ def _run_task(task: EpisodeTask) -> EpisodeOutcome:
 
 def run_job(job: Job) -> list[EpisodeOutcome]:
     """Run a job's episodes in this process (the function workers execute): each outcome holds
-    its result or, where its episode raised, the traceback."""
+    its result or, where its episode raised, the traceback, and this process's platform."""
+    try:
+        platform = current_platform()  # once a process: not charged to an episode's wall time
+    except Exception as exc:
+        return [_failed(task, exc, 0.0) for task in job]
     if len(job) == 1:
         try:
-            return [_run_task(job[0])]
+            outcomes = [_run_task(job[0])]
         except Exception as exc:
-            return [_failed(job[0], exc, 0.0)]
-    return _run_shared(job)
+            outcomes = [_failed(job[0], exc, 0.0)]
+    else:
+        outcomes = _run_shared(job)
+    return [replace(o, platform=platform) for o in outcomes]
 
 
 def _run_shared(job: Job) -> list[EpisodeOutcome]:

@@ -14,6 +14,7 @@ sees one, else the CPU; ``cpu`` and ``cuda`` (or ``cuda:N``) choose.
 
 from __future__ import annotations
 
+import hashlib
 import importlib.util
 import os
 import threading
@@ -88,6 +89,23 @@ def resolve_device(device: str = "auto") -> str:
     if kind == "cuda" and not _torch().cuda.is_available():
         raise ConfigError("device", f"{device!r}: this PyTorch sees no GPU (a CPU build?)")
     return device
+
+
+def compute_fingerprint(device: str = "auto") -> str:
+    """A digest (16 hex digits) of a fixed forward pass (a convolution, a matrix product, a
+    softmax) on ``device``, run as the methods run theirs: the same digest, the same rounding of
+    the kernels (the CPU's vector width, oneDNN's or cuDNN's choice) that a network's descriptors
+    go through."""
+    torch = _torch()
+    generator = torch.Generator().manual_seed(0)
+    x = torch.rand(1, 3, 32, 32, generator=generator)
+    weight = torch.rand(16, 3, 3, 3, generator=generator) - 0.5
+    dev = resolve_device(device)
+    with _inference():
+        y = torch.nn.functional.conv2d(x.to(dev), weight.to(dev), padding=1).flatten(2)[0]
+        z = torch.softmax(y.T @ y, dim=-1)  # (1024, 1024)
+        values = z.cpu().numpy()
+    return hashlib.sha256(values.tobytes()).hexdigest()[:16]
 
 
 def _tensor(image: NDArray[np.uint8], device: str) -> Any:

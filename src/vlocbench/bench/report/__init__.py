@@ -40,6 +40,7 @@ from vlocbench.bench.report.tables import (
     per_town_table,
     place_recall_table,
     planned_repetitions,
+    platforms_line,
     ranking_table,
     recall_table,
     requirements_table,
@@ -52,7 +53,7 @@ from vlocbench.bench.requirements import (
     placed_methods,
 )
 from vlocbench.bench.runs import Experiment, stored_episodes
-from vlocbench.bench.store import EpisodeRow, StoreError, read_episode_table
+from vlocbench.bench.store import EpisodeRow, StoreError, read_episode_table, read_platforms
 from vlocbench.bench.summary import BASELINE, Summary, summarize
 
 REPORT_DIR = "report"
@@ -61,6 +62,7 @@ __all__ = [
     "ReportFiles",
     "not_stored_line",
     "paper_comparison_tables",
+    "platforms_line",
     "summary_lines",
     "write_report",
 ]
@@ -73,6 +75,7 @@ class ReportFiles:
     latex: Path
     figures: tuple[Path, ...]
     summary: Summary
+    platforms: str  # platforms_line: which platforms the episodes ran on ('' if not recorded)
 
 
 @dataclass(frozen=True)
@@ -290,8 +293,9 @@ def write_report(
     tables = report_tables(summary, drives)
     md, tex = _write_tables(out, tables)
     figures = _write_figures(summary, out, drives)
-    page = write_page(summary, rows, tables, figures, examples, out)
-    return ReportFiles(page, md, tex, tuple(figures), summary)
+    platforms = platforms_line(summary, read_platforms(output_dir))
+    page = write_page(summary, rows, tables, figures, examples, out, platforms)
+    return ReportFiles(page, md, tex, tuple(figures), summary, platforms)
 
 
 def summary_lines(summary: Summary) -> Sequence[str]:

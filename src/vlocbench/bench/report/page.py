@@ -122,6 +122,13 @@ def _errors_html(summary: Summary) -> str:
     return "\n".join(parts)
 
 
+def _platforms_html(line: str) -> str:
+    """The platforms line, in the warning's colour where they are several."""
+    if not line:
+        return ""
+    return f"<p{' class=err' if line.startswith('WARNING') else ''}>{html.escape(line)}</p>"
+
+
 def _recordings_html(summary: Summary, rows: Sequence[EpisodeRow], out: Path) -> str:
     """Links to the rerun recordings ``vlocbench view`` wrote next to the report."""
     folder = out.parent / VIEW_DIR
@@ -153,6 +160,7 @@ def write_page(
     figures: list[Path],
     examples: bool,
     out: Path,
+    platforms: str = "",
 ) -> Path:
     spec = summary.spec
     page = out / "index.html"
@@ -175,6 +183,7 @@ def write_page(
             examples=_examples_html(summary) if examples else "",
             recordings=_recordings_html(summary, rows, out),
             error_details=_errors_html(summary),
+            platforms=_platforms_html(platforms),
         )
     )
     return page

@@ -47,6 +47,37 @@ def not_stored_line(summary: Summary) -> str:
     return f"nothing stored yet for {', '.join(names)}: not in this report" if names else ""
 
 
+def platforms_line(summary: Summary, records: Mapping[str, Mapping[str, Any]]) -> str:
+    """Which platforms the episodes ran on (:mod:`vlocbench.bench.platform`), by id and what
+    drew and computed them; a warning where they are several ('' when none is recorded)."""
+    known = sorted(((n, p) for p, n in summary.platforms.items() if p), reverse=True)
+    older = summary.platforms.get(None, 0)
+    if not known:
+        return ""
+    described = [f"{n} on {_platform_label(p, records.get(p, {}))}" for n, p in known]
+    if older:
+        described.append(f"{older} stored before platforms were recorded")
+    if len(known) == 1:
+        return "episodes computed on one platform: " + "; ".join(described)
+    return (
+        f"WARNING: episodes computed on {len(known)} platforms, which render or compute the same "
+        "scene differently, so that one config and seed need not give the same numbers on "
+        "each: " + "; ".join(described)
+    )
+
+
+def _platform_label(platform_id: str, record: Mapping[str, Any]) -> str:
+    """``id (GL driver, Mesa version; CPU; torch version on its device)``."""
+    d, packages = record.get("details", {}), record.get("packages", {})
+    gl = d.get("gl_renderer", "?")
+    mesa = d.get("gl_version", "").partition("Mesa ")[2]
+    torch = packages.get("torch", "")
+    parts = [f"{gl}, Mesa {mesa}" if mesa else gl, d.get("cpu", "?")]
+    if torch:
+        parts.append(f"torch {torch} on {d.get('torch_device', '?')}")
+    return f"{platform_id} ({'; '.join(parts)})"
+
+
 def fmt(value: float, digits: int = 1) -> str:
     return "–" if value is None or not np.isfinite(value) else f"{value:.{digits}f}"
 

@@ -1,0 +1,132 @@
+"""The platform an episode ran on, as far as its numbers depend on it: stored with every episode.
+
+The same config and seed give the same numbers on one machine, to the last digit; on another they
+need not. Its OpenGL driver draws a frame a little differently (:mod:`vlocbench.sim.fingerprint`),
+numpy's, OpenCV's and the BLAS's kernels are chosen by the CPU, and so are PyTorch's (ALIKED and
+XFeat pass through oneDNN's AVX-512 or AVX2 code, or a GPU's), and a closed-loop drive carries a
+rounding's difference on into other answers and failures. So each worker process computes, once,
+digests of fixed computations on each of them: episodes with the same :attr:`Platform.id` were
+computed alike, and a store whose episodes have several is named as such in its report.
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import importlib.util
+import json
+import platform as _machine
+from dataclasses import dataclass, field
+from importlib import metadata
+
+import numpy as np
+
+# the distributions whose versions a result's numbers depend on ("" where one is not installed)
+PACKAGES = (
+    "mujoco",
+    "pycolmap",
+    "numpy",
+    "opencv-contrib-python-headless",
+    "scipy",
+    "torch",
+    "kornia",
+)
+
+
+@dataclass(frozen=True)
+class Platform:
+    """Digests of fixed computations (16 hex digits each) and what ran them.
+
+    ``render``: the pixels of a fixed scene; ``numeric``: fixed numpy, BLAS and OpenCV results;
+    ``torch``: a fixed forward pass on the learned methods' device (``auto``'s), "" where
+    PyTorch is not installed; ``packages``: versions of :data:`PACKAGES`.
+    ``details`` (not part of the identity): the GL driver, the CPU, Python, the torch device.
+    """
+
+    render: str
+    numeric: str
+    torch: str
+    packages: dict[str, str]
+    details: dict[str, str] = field(default_factory=dict, compare=False)
+
+    @property
+    def id(self) -> str:
+        """The platform's identity: equal ids, equal numbers for equal configs and seeds."""
+        identity = [self.render, self.numeric, self.torch, sorted(self.packages.items())]
+        return hashlib.sha256(json.dumps(identity).encode()).hexdigest()[:12]
+
+    def to_dict(self) -> dict[str, object]:
+        return {
+            "id": self.id,
+            "render": self.render,
+            "numeric": self.numeric,
+            "torch": self.torch,
+            "packages": self.packages,
+            "details": self.details,
+        }
+
+
+def numeric_fingerprint() -> str:
+    """A digest of fixed numpy (matrix product, transcendental functions, a sum), SVD and OpenCV
+    (a blur, a resize) results: each dispatches to kernels the CPU's instruction set chooses."""
+    import cv2
+
+    a = np.random.default_rng(0).standard_normal((96, 96))
+    image = (np.random.default_rng(1).random((64, 80)) * 255).astype(np.float32)
+    values = (
+        a @ a.T,
+        np.exp(a),
+        np.sin(a),
+        np.arctan2(a, a.T),
+        np.sum(a, axis=0),
+        np.linalg.svd(a, compute_uv=False),
+        cv2.GaussianBlur(image, (7, 7), 1.6),
+        cv2.resize(image, (40, 32), interpolation=cv2.INTER_AREA),
+    )
+    digest = hashlib.sha256()
+    for v in values:
+        digest.update(np.ascontiguousarray(v, dtype=np.float64).tobytes())
+    return digest.hexdigest()[:16]
+
+
+def _version(package: str) -> str:
+    try:
+        return metadata.version(package)
+    except metadata.PackageNotFoundError:
+        return ""
+
+
+@functools.cache
+def current_platform() -> Platform:
+    """This process's platform, computed once (a few seconds: a small town drawn twice, PyTorch
+    loaded where it is installed, so that every episode of a machine has the same record)."""
+    from vlocbench.sim.fingerprint import render_fingerprint
+
+    render = render_fingerprint()
+    details = {
+        "gl_renderer": render.gl_renderer,
+        "gl_version": render.gl_version,
+        "gl_backend": render.backend,
+        "cpu": _cpu_name(),
+        "python": _machine.python_version(),
+    }
+    torch = ""
+    if importlib.util.find_spec("torch") is not None:
+        from vlocbench.loc.learned import compute_fingerprint, resolve_device
+
+        torch = compute_fingerprint()
+        details["torch_device"] = resolve_device()
+    packages = {p: _version(p) for p in PACKAGES}
+    return Platform(render.digest, numeric_fingerprint(), torch, packages, details)
+
+
+def _cpu_name() -> str:
+    """The CPU's model name (Linux), else what the platform module gives."""
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return _machine.processor() or _machine.machine()
