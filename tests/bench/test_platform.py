@@ -34,3 +34,19 @@ def test_the_numeric_digest_follows_the_blas_kernels_not_the_threads():
         pytest.skip(f"OpenBLAS's x86-64 kernels are the other ones tried; numpy uses {blas}")
     # the oldest x86-64 kernels (SSE3) round a matrix product otherwise than a newer CPU's
     assert _numeric_in_a_process(OPENBLAS_CORETYPE="Prescott") != here
+
+
+def test_a_pytorch_that_does_not_load_leaves_the_platform_without_it(monkeypatch):
+    import vlocbench.loc.learned as learned
+
+    def broken(device="auto"):
+        raise OSError("libtorch_cpu.so: cannot open shared object file")
+
+    monkeypatch.setattr(learned, "compute_fingerprint", broken)
+    current_platform.cache_clear()
+    try:
+        p = current_platform()
+    finally:
+        current_platform.cache_clear()
+    assert p.torch == "" and "cannot open shared object" in p.details["torch_error"]
+    assert p.render == current_platform().render

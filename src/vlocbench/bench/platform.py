@@ -39,7 +39,8 @@ class Platform:
 
     ``render``: the pixels of a fixed scene; ``numeric``: fixed numpy, BLAS and OpenCV results;
     ``torch``: a fixed forward pass on the learned methods' device (``auto``'s), "" where
-    PyTorch is not installed; ``packages``: versions of :data:`PACKAGES`.
+    PyTorch is not installed or does not load (``details["torch_error"]`` then says why; the
+    methods without a network run on); ``packages``: versions of :data:`PACKAGES`.
     ``details`` (not part of the identity): the GL driver, the CPU, Python, the torch device.
     """
 
@@ -114,8 +115,11 @@ def current_platform() -> Platform:
     if importlib.util.find_spec("torch") is not None:
         from vlocbench.loc.learned import compute_fingerprint, resolve_device
 
-        torch = compute_fingerprint()
-        details["torch_device"] = resolve_device()
+        try:
+            torch = compute_fingerprint()
+            details["torch_device"] = resolve_device()
+        except Exception as exc:  # a PyTorch that does not load stops its methods, not the rest
+            details["torch_error"] = f"{type(exc).__name__}: {exc}"[:300]
     packages = {p: _version(p) for p in PACKAGES}
     return Platform(render.digest, numeric_fingerprint(), torch, packages, details)
 
