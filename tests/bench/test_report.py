@@ -37,12 +37,21 @@ def test_report_of_a_run(tiny):
     here = current_platform()
     assert files.platforms.startswith(f"episodes computed on one platform: 5 on {here.id} (")
     assert here.details["gl_renderer"] in files.platforms and html.escape(files.platforms) in page
+    assert files.platforms.endswith("; their maps and galleries made on the same platform")
+    label = files.platforms.split(" on ", 2)[2].split("; their")[0]  # id (driver; CPU; torch)
     mixed = dataclasses.replace(files.summary, platforms={here.id: 3, "0123456789ab": 1, None: 1})
     line = platforms_line(mixed, {here.id: here.to_dict()})
     assert line.startswith("WARNING: episodes computed on 2 platforms")
     assert line.endswith(
-        f"3 on {files.platforms.split(' on ', 2)[2]}; 1 on 0123456789ab (?; ?); "
-        "1 stored before platforms were recorded"
+        f"3 on {label}; 1 on 0123456789ab (?; ?); 1 stored before platforms were recorded"
+    )
+    # a map made elsewhere, on a gallery made here, and a map from before they were recorded
+    elsewhere = {"id": "fedcba987654", "details": {"gl_renderer": "NVIDIA H100", "cpu": "Xeon"}}
+    maps = [{"made_on": elsewhere, "gallery": "g", "gallery_made_on": here.to_dict()}, {}]
+    line = platforms_line(dataclasses.replace(files.summary, platforms={here.id: 5}), {}, maps)
+    assert line.endswith(
+        "; their maps made 1 on fedcba987654 (NVIDIA H100; Xeon), 1 before it was recorded"
+        f"; their galleries made 1 on {label}, 1 before it was recorded"
     )
 
 

@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 from vlocbench.bench.experiment import load_experiment
-from vlocbench.bench.platform import current_platform
+from vlocbench.bench.platform import current_platform, read_platform_file
 from vlocbench.bench.runner import run_experiment
 from vlocbench.bench.store import DB_FILE, ResultStore, read_platforms
 
@@ -29,6 +29,13 @@ def test_experiment_runs_end_to_end_and_resumes(tiny):
     here = current_platform()
     assert {r.platform for r in rows} == {here.id}
     assert read_platforms(root / "out") == {here.id: json.loads(json.dumps(here.to_dict()))}
+    # and the gallery and the map, each in its folder: made here too
+    [gallery] = (root / "cache" / "galleries").iterdir()
+    [map_dir] = (root / "cache" / "maps").glob("*/*")
+    assert read_platform_file(gallery)["made_on"]["id"] == here.id
+    made = read_platform_file(map_dir)
+    assert made["made_on"]["id"] == made["gallery_made_on"]["id"] == here.id
+    assert made["gallery"] == gallery.name
     recall = [r for r in rows if r.kind == "recall"]
     assert len(recall) == 2 and all(r.metrics.queries > 10 for r in recall)
     assert all(r.metrics.recall[3] > 0.5 for r in recall)  # it localizes on its own map

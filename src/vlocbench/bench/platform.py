@@ -18,9 +18,12 @@ import json
 import platform as _machine
 from dataclasses import dataclass, field
 from importlib import metadata
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 
+PLATFORM_FILE = "platform.json"  # in a gallery's and a map's folder: what made it
 # the distributions whose versions a result's numbers depend on ("" where one is not installed)
 PACKAGES = (
     "mujoco",
@@ -122,6 +125,28 @@ def current_platform() -> Platform:
             details["torch_error"] = f"{type(exc).__name__}: {exc}"[:300]
     packages = {p: _version(p) for p in PACKAGES}
     return Platform(render.digest, numeric_fingerprint(), torch, packages, details)
+
+
+def write_platform_file(folder: Path, gallery: Path | None = None) -> None:
+    """Record in a gallery's or map's ``folder``, just made, the platform that made it (and, for a
+    map, its gallery's record, from ``gallery``): the cache is keyed by what determines a
+    gallery, not by the machine that drew it."""
+    record: dict[str, Any] = {"made_on": current_platform().to_dict()}
+    if gallery is not None:
+        record["gallery"] = gallery.name
+        record["gallery_made_on"] = read_platform_file(gallery).get("made_on")
+    tmp = folder / (PLATFORM_FILE + ".tmp")
+    tmp.write_text(json.dumps(record, indent=1))
+    tmp.replace(folder / PLATFORM_FILE)
+
+
+def read_platform_file(folder: Path) -> dict[str, Any]:
+    """A gallery's or map's platform record ({} where it has none: made before they were
+    recorded, or the process was killed between the two files)."""
+    try:
+        return dict(json.loads((folder / PLATFORM_FILE).read_text()))
+    except (OSError, ValueError):
+        return {}
 
 
 def _cpu_name() -> str:

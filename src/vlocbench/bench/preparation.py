@@ -15,6 +15,7 @@ from vlocbench.bench.executors import worker_pool
 from vlocbench.bench.experiment import ExperimentPlan
 from vlocbench.bench.gallery_capture import capture_gallery
 from vlocbench.bench.methods import MethodSpec
+from vlocbench.bench.platform import write_platform_file
 from vlocbench.bench.progress import Progress, unit_of
 from vlocbench.bench.towns import route_named, town_named
 from vlocbench.loc.gallery import GALLERY_FILE, Gallery
@@ -157,6 +158,7 @@ def _gallery(plan: ExperimentPlan, town_name: str, cache: Path, bars: StageBars)
                     spec.gallery.speed_mps,
                     progress=lambda n: bars(f"{town.name} gallery", n, shots),
                 )
+            write_platform_file(gallery_dir)
             logger.info(f"{town.name}: gallery captured in {time.perf_counter() - t:.0f} s")
     return Gallery.load(gallery_dir)
 
@@ -173,7 +175,8 @@ def _map(
     """The map of ``method`` on the town's ``gallery`` in ``map_dir``, built unless it is there
     (``pool``: processes that match its pairs)."""
     name = town_named(town_name).name
-    if not (map_dir / MAP_FILE).exists():
+    built_here = not (map_dir / MAP_FILE).exists()
+    if built_here:
         logger.info(f"{name}: building the {method.name} map in {map_dir}")
     label = f"{name} {method.name}"
     report = build_map(
@@ -184,5 +187,7 @@ def _map(
         progress=lambda stage, done, total: bars(f"{label} {stage}", done, total),
         pool=pool,
     )
+    if built_here:
+        write_platform_file(map_dir, gallery.root)
     logger.info(f"{name}: {method.name} map: {report.images} images, {report.points} points")
     return map_dir

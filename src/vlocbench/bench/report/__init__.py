@@ -12,6 +12,7 @@ from pathlib import Path
 from vlocbench.bench.across import across_towns, rank_agreement
 from vlocbench.bench.consistency import confidence_curve
 from vlocbench.bench.metrics import METRICS
+from vlocbench.bench.platform import read_platform_file
 from vlocbench.bench.report.comparison import paper_comparison_tables
 from vlocbench.bench.report.figures import (
     computation_time_figure,
@@ -293,7 +294,9 @@ def write_report(
     tables = report_tables(summary, drives)
     md, tex = _write_tables(out, tables)
     figures = _write_figures(summary, out, drives)
-    platforms = platforms_line(summary, read_platforms(output_dir))
+    map_dirs = sorted({r.config["map_dir"] for r in rows if r.config.get("map_dir")})
+    maps = [read_platform_file(Path(d)) for d in map_dirs]
+    platforms = platforms_line(summary, read_platforms(output_dir), maps)
     page = write_page(summary, rows, tables, figures, examples, out, platforms)
     return ReportFiles(page, md, tex, tuple(figures), summary, platforms)
 

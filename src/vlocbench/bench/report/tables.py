@@ -5,6 +5,7 @@ failures by cause and place, and the odometry's drift."""
 
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import Mapping, Sequence
 from typing import Any, Literal
 
@@ -47,22 +48,57 @@ def not_stored_line(summary: Summary) -> str:
     return f"nothing stored yet for {', '.join(names)}: not in this report" if names else ""
 
 
-def platforms_line(summary: Summary, records: Mapping[str, Mapping[str, Any]]) -> str:
+def platforms_line(
+    summary: Summary,
+    records: Mapping[str, Mapping[str, Any]],
+    maps: Sequence[Mapping[str, Any]] = (),
+) -> str:
     """Which platforms the episodes ran on (:mod:`vlocbench.bench.platform`), by id and what
-    drew and computed them; a warning where they are several ('' when none is recorded)."""
+    drew and computed them, then those that made their maps and galleries (``maps``: each map's
+    platform file); a warning where the episodes' are several ('' when none is recorded)."""
     known = sorted(((n, p) for p, n in summary.platforms.items() if p), reverse=True)
     older = summary.platforms.get(None, 0)
     if not known:
         return ""
+    records = {**records}
+    for m in maps:  # a map's or gallery's platform need not be an episode's
+        for made in (m.get("made_on"), m.get("gallery_made_on")):
+            if made:
+                records.setdefault(made["id"], made)
     described = [f"{n} on {_platform_label(p, records.get(p, {}))}" for n, p in known]
     if older:
         described.append(f"{older} stored before platforms were recorded")
+    galleries = {m.get("gallery"): m.get("gallery_made_on") for m in maps}  # several maps each
+    made = {
+        "maps": _made_on([(m.get("made_on") or {}).get("id") for m in maps], records, known[0][1]),
+        "galleries": _made_on(
+            [(g or {}).get("id") for g in galleries.values()], records, known[0][1]
+        ),
+    }
+    if made["maps"] == made["galleries"] == "on the same platform":
+        described.append("their maps and galleries made on the same platform")
+    else:
+        described += [f"their {what} made {how}" for what, how in made.items() if how]
     if len(known) == 1:
         return "episodes computed on one platform: " + "; ".join(described)
     return (
         f"WARNING: episodes computed on {len(known)} platforms, which render or compute the same "
         "scene differently, so that one config and seed need not give the same numbers on "
         "each: " + "; ".join(described)
+    )
+
+
+def _made_on(ids: Sequence[str | None], records: Mapping[str, Any], episodes_id: str) -> str:
+    """On which platforms the maps (or galleries) with platform ``ids`` were made: 'on the same
+    platform' where all on the episodes' (first) one; '' where there are none."""
+    counts = Counter(ids)
+    if not counts:
+        return ""
+    if set(counts) == {episodes_id}:
+        return "on the same platform"
+    return ", ".join(
+        f"{n} on {_platform_label(i, records.get(i, {}))}" if i else f"{n} before it was recorded"
+        for i, n in sorted(counts.items(), key=lambda x: (x[0] is None, -x[1]))
     )
 
 
