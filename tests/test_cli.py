@@ -324,3 +324,29 @@ def test_towns_lists_the_built_in_ones_and_generates_others(capsys, tmp_path):
     assert sorted(p.name for p in out.iterdir()) == ["gen-city-3-0.png", "gen-city-3-1.png"]
     assert main(["towns", "--generate", "2", "--style", "village", "-o", str(out)]) == 1
     assert "unknown style 'village'; valid: city, town" in capsys.readouterr().err
+
+
+def test_platform_names_this_machine_and_what_a_store_ran_on(tiny, tmp_path, capsys):
+    import json
+    import sqlite3
+
+    from vlocbench.bench.platform import current_platform
+    from vlocbench.bench.store import DB_FILE
+
+    root, _ = tiny
+    here = current_platform()
+    assert main(["platform", str(root / "out")]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith(f"platform {here.id}\n  render   {here.render}  ")
+    assert f"5 finished episodes\n       5 on {here.id} (this machine's)" in out
+    # the failure drives as if run on a machine whose renderer draws otherwise
+    shutil.copytree(root / "out", tmp_path / "copy")
+    other = {**here.to_dict(), "id": "0123456789ab", "render": "f" * 16}
+    with sqlite3.connect(tmp_path / "copy" / DB_FILE) as db:
+        db.execute("UPDATE episodes SET platform = '0123456789ab' WHERE kind = 'failure'")
+        db.execute("INSERT INTO platforms VALUES ('0123456789ab', ?)", (json.dumps(other),))
+    assert main(["platform", str(tmp_path / "copy"), "--json"]) == 0
+    out = capsys.readouterr().out
+    assert json.loads(out[: out.index("\n}") + 2]) == json.loads(json.dumps(here.to_dict()))
+    assert f"3 on {here.id} (this machine's)" in out
+    assert "2 on 0123456789ab (not this machine's: ['render'])" in out

@@ -319,6 +319,44 @@ def _signals_interrupt() -> Iterator[None]:
             signal.signal(sig, handler)
 
 
+def _platform(args: argparse.Namespace) -> int:
+    import json
+
+    from vlocbench.bench.platform import current_platform
+    from vlocbench.bench.store import count_platforms, read_platforms
+
+    here = current_platform()
+    if args.json:
+        print(json.dumps(here.to_dict(), indent=1))
+    else:
+        d = here.details
+        print(f"platform {here.id}")
+        print(
+            f"  render   {here.render}  {d['gl_renderer']}, {d['gl_version']} ({d['gl_backend']})"
+        )
+        print(f"  numeric  {here.numeric}  {d['cpu']}, Python {d['python']}")
+        torch = here.torch or "-" * 16
+        print(
+            f"  torch    {torch}  {d.get('torch_device') or d.get('torch_error', 'not installed')}"
+        )
+        print("  packages " + ", ".join(f"{k} {v or '-'}" for k, v in here.packages.items()))
+    for output in args.output:
+        counts = count_platforms(output)
+        records = read_platforms(output)
+        print(f"{output}: {sum(counts.values())} finished episodes")
+        for platform_id, n in sorted(counts.items(), key=lambda x: (x[0] is None, -x[1])):
+            if platform_id is None:
+                print(f"  {n:6d} stored before platforms were recorded")
+                continue
+            other, mine = records.get(platform_id, {}), here.to_dict()
+            differs = [
+                k for k in ("render", "numeric", "torch", "packages") if other.get(k) != mine[k]
+            ]
+            how = "this machine's" if platform_id == here.id else f"not this machine's: {differs}"
+            print(f"  {n:6d} on {platform_id} ({how})")
+    return 0
+
+
 def _report(args: argparse.Namespace) -> int:
     from vlocbench.bench.report import not_stored_line, summary_lines, write_report
     from vlocbench.bench.store import count_episodes
@@ -790,6 +828,16 @@ EXPERIMENT_HELP = (
 
 
 def _add_experiment_verbs(sub: Any, shared: dict[str, argparse.ArgumentParser]) -> None:
+    p = sub.add_parser(
+        "platform",
+        help="this machine's platform (what its renders and kernels compute), and stores' against it",
+    )
+    p.add_argument(
+        "output", type=Path, nargs="*", help="output folders whose episodes' platforms to compare"
+    )
+    p.add_argument("--json", action="store_true", help="the whole record as JSON")
+    p.set_defaults(func=_platform)
+
     p = sub.add_parser(
         "run",
         parents=[shared["report"]],

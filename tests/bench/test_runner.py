@@ -150,3 +150,28 @@ def test_recall_drives_of_several_methods_share_a_drive_in_a_run(tiny, tmp_path)
             assert getattr(metrics, name) == getattr(solo[key], name), name
     answered = sorted(m.recall[-1] for m in rows["shared"].values())
     assert answered[0] < answered[-1]  # the two methods differ: the comparison can fail
+
+
+def test_a_store_carried_to_another_platform_is_named_as_its_run_resumes(tiny, tmp_path, caplog):
+    import shutil
+
+    root, _ = tiny
+    out = tmp_path / "out"
+    shutil.copytree(root / "out", out)
+    with sqlite3.connect(out / DB_FILE) as db:  # as if run on a machine that draws otherwise
+        db.execute("UPDATE episodes SET platform = '0123456789ab'")
+        db.execute("DELETE FROM episodes WHERE kind = 'baseline'")  # one episode left to run
+    plan = load_experiment(root / "tiny.yaml").with_output(out)
+    with caplog.at_level("WARNING"):
+        again = run_experiment(plan, progress=False)
+    assert (again.skipped, again.finished) == (4, 1)
+    here = current_platform().id
+    assert f"this machine is platform {here}; the store's episodes ran on others (4 on " in (
+        caplog.text
+    )
+    with ResultStore(out, "tiny") as store:
+        assert store.platform_counts() == {"0123456789ab": 4, here: 1}
+    caplog.clear()
+    with caplog.at_level("WARNING"):  # nothing left to run: nothing to say
+        run_experiment(plan, progress=False)
+    assert "this machine is platform" not in caplog.text

@@ -13,6 +13,7 @@ from pathlib import Path
 from vlocbench.bench.executors import Runner, check_workers, execute
 from vlocbench.bench.experiment import EpisodeTask, ExperimentPlan
 from vlocbench.bench.methods import check_methods
+from vlocbench.bench.platform import current_platform
 from vlocbench.bench.preparation import prepare_maps
 from vlocbench.bench.store import ResultStore, StoreError, run_hash
 from vlocbench.bench.worker import run_job
@@ -76,6 +77,8 @@ def run_experiment(
         store.start_run(run_hash(keys), to_dict(plan), keys)
         done = store.done_keys()
         todo = [t for t in tasks if t.key not in done]
+        if todo:
+            _check_platform(plan, store)
         logger.info(
             f"{plan.name}: {len(tasks)} episodes over {len(plan.setups)} setup(s); "
             f"{len(tasks) - len(todo)} already done, {len(todo)} to run"
@@ -120,6 +123,22 @@ def _check_galleries(tasks: Sequence[EpisodeTask], store: ResultStore) -> None:
                 f"{Path(t.map_dir).parent.name}: the gallery was captured again with other "
                 "content. Run into another output folder, or restore the cache it was driven with"
             )
+
+
+def _check_platform(plan: ExperimentPlan, store: ResultStore) -> None:
+    """Warn when the episodes about to run join stored ones of other platforms only (a store
+    carried to another machine): their numbers need not agree to the last digit, or beyond."""
+    stored = {p: n for p, n in store.platform_counts().items() if p}
+    if not stored:
+        return
+    here = current_platform().id  # a few seconds, once a process: only where there is a record
+    if here not in stored:
+        ran_on = ", ".join(f"{n} on {p}" for p, n in sorted(stored.items()))
+        logger.warning(
+            f"{plan.name}: this machine is platform {here}; the store's episodes ran on others "
+            f"({ran_on}): its renders and kernels may differ, and so may the numbers (`vlocbench "
+            f"platform {store.root}` compares them)"
+        )
 
 
 def _order(tasks: Iterable[EpisodeTask]) -> list[EpisodeTask]:

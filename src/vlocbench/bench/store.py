@@ -215,6 +215,19 @@ def read_platforms(output_dir: str | Path) -> dict[str, dict[str, Any]]:
         return {i: json.loads(r) for i, r in db.execute("SELECT id, record FROM platforms")}
 
 
+def count_platforms(output_dir: str | Path) -> dict[str | None, int]:
+    """The finished episodes by the id of the platform they ran on (None: not recorded)."""
+    with _read_only(output_dir) as db:
+        return _platform_counts(db)
+
+
+def _platform_counts(db: sqlite3.Connection) -> dict[str | None, int]:
+    columns = {c for _, c, *_ in db.execute("PRAGMA table_info(episodes)")}
+    column = "platform" if "platform" in columns else "NULL"  # a store from before, read-only
+    query = f"SELECT {column}, count(*) FROM episodes WHERE status='ok' GROUP BY 1"
+    return dict(db.execute(query).fetchall())
+
+
 def _columns(result: EpisodeResult) -> tuple[dict[str, Any], dict[str, Any]]:
     import pyarrow as pa
 
@@ -336,6 +349,10 @@ class ResultStore:
     def done_keys(self) -> set[str]:
         """Keys of the episodes finished without error."""
         return {k for (k,) in self._conn.execute("SELECT key FROM episodes WHERE status='ok'")}
+
+    def platform_counts(self) -> dict[str | None, int]:
+        """The finished episodes by the id of the platform they ran on (None: not recorded)."""
+        return _platform_counts(self._conn)
 
     def stored_map_dirs(self) -> dict[str, str]:
         """The map folder each finished episode was driven with, by key (those with a map)."""
