@@ -350,3 +350,13 @@ def test_platform_names_this_machine_and_what_a_store_ran_on(tiny, tmp_path, cap
     assert json.loads(out[: out.index("\n}") + 2]) == json.loads(json.dumps(here.to_dict()))
     assert f"3 on {here.id} (this machine's)" in out
     assert "2 on 0123456789ab (not this machine's: ['render'])" in out
+
+
+def test_verify_drives_stored_episodes_again(tiny, capsys):
+    root, _ = tiny
+    assert main(["verify", str(root / "out"), "--kinds", "baseline,failure", "--count", "2"]) == 0
+    out = capsys.readouterr().out
+    assert out.count(": the same to the last digit (") == 2
+    assert out.endswith("2 of 2 the same to the last digit\n")
+    assert main(["verify", str(root / "out"), "--kinds", "drive"]) == 1
+    assert "--kinds: unknown episode kind 'drive'" in capsys.readouterr().err

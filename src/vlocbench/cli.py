@@ -357,6 +357,25 @@ def _platform(args: argparse.Namespace) -> int:
     return 0
 
 
+def _verify(args: argparse.Namespace) -> int:
+    from vlocbench.bench.verify import verify_episodes
+
+    verdicts = verify_episodes(
+        args.output, args.experiment, args.count, args.kinds or (), args.key or (), args.seed
+    )
+    for v in verdicts:
+        print(v.line())
+    impure = [v for v in verdicts if v.same is False and v.same_platform]
+    elsewhere = [v for v in verdicts if v.same is False and not v.same_platform]
+    same = sum(v.same is True for v in verdicts)
+    print(
+        f"{same} of {len(verdicts)} the same to the last digit"
+        + (f"; {len(impure)} differ on the platform they were stored on" if impure else "")
+        + (f"; {len(elsewhere)} differ, stored on another platform" if elsewhere else "")
+    )
+    return 1 if impure else 0
+
+
 def _report(args: argparse.Namespace) -> int:
     from vlocbench.bench.report import not_stored_line, summary_lines, write_report
     from vlocbench.bench.store import count_episodes
@@ -828,6 +847,24 @@ EXPERIMENT_HELP = (
 
 
 def _add_experiment_verbs(sub: Any, shared: dict[str, argparse.ArgumentParser]) -> None:
+    p = sub.add_parser(
+        "verify",
+        help="drive stored episodes again and compare them with their stored results",
+    )
+    p.add_argument("output", type=Path, help="the experiment's output folder")
+    p.add_argument("--experiment", type=Path, help=EXPERIMENT_HELP)
+    p.add_argument(
+        "--count", type=_count, default=1, help="how many episodes to drive again (default 1)"
+    )
+    p.add_argument(
+        "--kinds",
+        type=_names,
+        help="only of these kinds (comma-separated: recall, failure, baseline)",
+    )
+    p.add_argument("--key", action="append", help="this episode (repeat for more); not --count")
+    p.add_argument("--seed", type=int, default=0, help="seed of the choice of episodes")
+    p.set_defaults(func=_verify)
+
     p = sub.add_parser(
         "platform",
         help="this machine's platform (what its renders and kernels compute), and stores' against it",

@@ -1,0 +1,53 @@
+"""Stored episodes driven again: the same to the last digit, and a changed drive named."""
+
+import pyarrow as pa
+import pyarrow.parquet as pq
+import pytest
+
+from vlocbench.bench.platform import current_platform
+from vlocbench.bench.store import EPISODES_DIR
+from vlocbench.bench.verify import verify_episodes
+from vlocbench.errors import ConfigError, UnknownNameError
+
+
+def test_a_stored_episode_driven_again_is_the_same_and_a_changed_drive_is_named(tiny, monkeypatch):
+    import vlocbench.nav.ekf as ekf
+
+    root, _ = tiny
+    [v] = verify_episodes(root / "out", count=1, kinds=["failure"])
+    assert v.same is True and v.differences == () and v.same_platform
+    assert v.platform == current_platform().id and v.row.kind == "failure"
+    assert v.line().endswith("the same to the last digit (0.0 min)")
+    # the code changes what the key drives (the EKF's variance at a start), the key does not
+    monkeypatch.setattr(ekf, "_KNOWN_VAR", 1e-3)
+    [v] = verify_episodes(root / "out", keys=[v.row.key])
+    assert v.same is False
+    assert "DIFFERS on this platform, as it was stored: the code changed what this key" in v.line()
+    assert any(d.startswith("trajectory step ") and " in ekf_" in d for d in v.differences)
+
+
+def test_a_stored_result_unlike_its_drive_is_found_where_it_differs(tiny, tmp_path):
+    import shutil
+
+    root, _ = tiny
+    out = tmp_path / "out"
+    shutil.copytree(root / "out", out)
+    [v] = verify_episodes(out, count=1, kinds=["baseline"])
+    path = out / EPISODES_DIR / v.row.key / "trajectory.parquet"
+    table = pq.read_table(path).to_pydict()
+    table["true_x_m"][7] += 1e-9  # a nanometre, at step 7
+    pq.write_table(pa.Table.from_pydict(table), path)
+    [v] = verify_episodes(out, keys=[v.row.key])
+    assert v.same is False
+    assert v.differences[0].startswith("trajectory step 7 (t = 0.35 s) first differs, in true_x_m")
+
+
+def test_bad_choices_are_named(tiny):
+    root, _ = tiny
+    with pytest.raises(
+        UnknownNameError,
+        match=r"--kinds: unknown episode kind .drive.; valid: baseline, failure, recall",
+    ):
+        verify_episodes(root / "out", kinds=["drive"])
+    with pytest.raises(ConfigError, match="--key: no finished episode of this store has key x"):
+        verify_episodes(root / "out", keys=["x"])
