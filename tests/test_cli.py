@@ -354,7 +354,8 @@ def test_platform_names_this_machine_and_what_a_store_ran_on(tiny, tmp_path, cap
 
 def test_verify_drives_stored_episodes_again(tiny, capsys):
     root, _ = tiny
-    assert main(["verify", str(root / "out"), "--kinds", "baseline,failure", "--count", "2"]) == 0
+    args = ["--kinds", "baseline,failure", "--methods", "sift,odometry", "--count", "2"]
+    assert main(["verify", str(root / "out"), *args]) == 0
     out = capsys.readouterr().out
     assert out.count(": the same to the last digit (") == 2
     assert out.endswith("2 of 2 the same to the last digit\n")

@@ -361,7 +361,13 @@ def _verify(args: argparse.Namespace) -> int:
     from vlocbench.bench.verify import verify_episodes
 
     verdicts = verify_episodes(
-        args.output, args.experiment, args.count, args.kinds or (), args.key or (), args.seed
+        args.output,
+        args.experiment,
+        args.count,
+        args.kinds or (),
+        args.key or (),
+        args.seed,
+        args.methods or (),
     )
     for v in verdicts:
         print(v.line())
@@ -860,6 +866,9 @@ def _add_experiment_verbs(sub: Any, shared: dict[str, argparse.ArgumentParser]) 
         "--kinds",
         type=_names,
         help="only of these kinds (comma-separated: recall, failure, baseline)",
+    )
+    p.add_argument(
+        "--methods", type=_names, help="only of these methods (comma-separated; odometry: the line)"
     )
     p.add_argument("--key", action="append", help="this episode (repeat for more); not --count")
     p.add_argument("--seed", type=int, default=0, help="seed of the choice of episodes")

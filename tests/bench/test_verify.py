@@ -49,5 +49,9 @@ def test_bad_choices_are_named(tiny):
         match=r"--kinds: unknown episode kind .drive.; valid: baseline, failure, recall",
     ):
         verify_episodes(root / "out", kinds=["drive"])
+    with pytest.raises(
+        UnknownNameError, match=r"--methods: unknown method 'orb'; valid: odometry, sift"
+    ):
+        verify_episodes(root / "out", methods=["orb"])
     with pytest.raises(ConfigError, match="--key: no finished episode of this store has key x"):
         verify_episodes(root / "out", keys=["x"])

@@ -77,9 +77,11 @@ def pick_episodes(
     kinds: Sequence[str] = (),
     keys: Sequence[str] = (),
     seed: int = 0,
+    methods: Sequence[str] = (),
 ) -> list[EpisodeRow]:
-    """The finished episodes to drive again: those of ``keys``, else ``count`` of ``kinds`` (all
-    kinds by default) drawn with ``seed``, in key order."""
+    """The finished episodes to drive again: those of ``keys``, else ``count`` of ``kinds`` and
+    ``methods`` (all by default; the odometry line is the method ``odometry``) drawn with
+    ``seed``, in key order."""
     for kind in kinds:
         if kind not in EPISODE_KINDS:
             raise UnknownNameError("episode kind", kind, EPISODE_KINDS, "--kinds")
@@ -90,7 +92,13 @@ def pick_episodes(
         if missing:
             raise ConfigError("--key", f"no finished episode of this store has key {missing[0]}")
         return [by_key[k] for k in keys]
-    pool = [r for r in done if not kinds or r.kind in kinds]
+    stored_methods = sorted({r.method for r in done})
+    for method in methods:
+        if method not in stored_methods:
+            raise UnknownNameError("method", method, stored_methods, "--methods")
+    pool = [
+        r for r in done if (not kinds or r.kind in kinds) and (not methods or r.method in methods)
+    ]
     if not pool:
         raise ConfigError("--kinds", f"no finished episode of kinds {', '.join(kinds)} stored")
     chosen = np.random.default_rng(seed).choice(len(pool), min(count, len(pool)), replace=False)
@@ -104,6 +112,7 @@ def verify_episodes(
     kinds: Sequence[str] = (),
     keys: Sequence[str] = (),
     seed: int = 0,
+    methods: Sequence[str] = (),
 ) -> list[Verdict]:
     """Drive again episodes of the store in ``output_dir`` (those of the latest run, or all of
     ``experiment``'s; chosen by :func:`pick_episodes`) and compare each with its stored result."""
@@ -111,7 +120,8 @@ def verify_episodes(
     tasks = {t.key: t for t in plan.tasks()}
     here = current_platform().id
     verdicts = []
-    for row in pick_episodes([r for r in rows if r.key in tasks], count, kinds, keys, seed):
+    chosen = pick_episodes([r for r in rows if r.key in tasks], count, kinds, keys, seed, methods)
+    for row in chosen:
         task = _on_its_map(tasks[row.key], row)
         if task.episode.latency.mode == "measured":
             reason = "its latency is the measured computation time, which follows the machine"
