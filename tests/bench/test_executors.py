@@ -198,3 +198,31 @@ def test_an_unreachable_scheduler_is_a_clear_error(tmp_path, monkeypatch):
     monkeypatch.setattr(executors, "CONNECT_TIMEOUT_S", 1)
     with ResultStore(tmp_path, "fake") as store, pytest.raises(ConfigError, match="cannot reach"):
         execute(fake_tasks(), store, scheduler="tcp://127.0.0.1:9", runner=run_fake, progress=False)
+
+
+def test_a_dask_cluster_of_unlike_machines_is_named_before_its_episodes(tmp_path, caplog):
+    """Two workers, one of them drawing with Mesa's other rasterizer (as another machine's
+    driver would): the run says so before any episode."""
+    distributed = pytest.importorskip("distributed")
+    from vlocbench.bench.platform import current_platform
+
+    if "llvmpipe" not in current_platform().details["gl_renderer"]:
+        pytest.skip("Mesa's softpipe is the unlike renderer tried; this machine has no llvmpipe")
+    nanny = {"cls": distributed.Nanny, "options": {"nthreads": 1, "host": "127.0.0.1"}}
+    softpipe = {**nanny, "options": {**nanny["options"], "env": {"GALLIUM_DRIVER": "softpipe"}}}
+    scheduler = {
+        "cls": distributed.Scheduler,
+        "options": {"host": "127.0.0.1", "dashboard_address": None},
+    }
+    with (
+        distributed.SpecCluster(
+            scheduler=scheduler, workers={"llvmpipe": nanny, "softpipe": softpipe}
+        ) as cluster,
+        ResultStore(tmp_path / "out", "fake") as store,
+        caplog.at_level("WARNING"),
+    ):
+        cluster.wait_for_workers(2)
+        address = cluster.scheduler_address
+        execute(fake_tasks()[:2], store, scheduler=address, runner=run_fake, progress=False)
+    assert "the Dask cluster's workers are on 2 platforms (" in caplog.text
+    assert current_platform().id in caplog.text

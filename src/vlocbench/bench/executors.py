@@ -10,6 +10,7 @@ process that dies (a crash, the OOM killer) takes only its episodes with it: the
 from __future__ import annotations
 
 import concurrent.futures as cf
+import logging
 import multiprocessing
 import os
 import time
@@ -25,11 +26,19 @@ from vlocbench.bench.metrics import episode_metrics
 from vlocbench.bench.progress import Progress
 from vlocbench.bench.store import EpisodeRow, ResultStore
 from vlocbench.bench.towns import town_named
-from vlocbench.bench.worker import EpisodeOutcome, Job, jobs_of, run_job, worker_init
+from vlocbench.bench.worker import (
+    EpisodeOutcome,
+    Job,
+    jobs_of,
+    run_job,
+    worker_init,
+    worker_platform_id,
+)
 from vlocbench.config import to_dict
 from vlocbench.errors import ConfigError
 
 CONNECT_TIMEOUT_S = 10  # to a Dask scheduler
+logger = logging.getLogger(__name__)
 
 
 @dataclass
@@ -273,6 +282,7 @@ def _run_on_dask(
     the tally."""
     client = _dask_client(scheduler)
     try:
+        _check_dask_platforms(client)
         tally.slots = sum(client.nthreads().values()) or 1
         window = 2 * tally.slots
         pending = deque(jobs)
@@ -307,6 +317,22 @@ def _run_on_dask(
             future.cancel()
     finally:
         client.close()
+
+
+def _check_dask_platforms(client: Any) -> None:
+    """Warn, before any episode, when the cluster's workers are on several platforms: each
+    renders and rounds as its machine does, so a store they fill together mixes them (every
+    worker computes its record now, once, as its first episode would)."""
+    workers: dict[str, list[str]] = {}
+    for address, platform_id in client.run(worker_platform_id).items():
+        workers.setdefault(platform_id, []).append(address)
+    if len(workers) > 1:
+        on = "; ".join(f"{p}: {', '.join(sorted(a))}" for p, a in sorted(workers.items()))
+        logger.warning(
+            f"the Dask cluster's workers are on {len(workers)} platforms ({on}): they render or "
+            "compute the same scene differently, so one config and seed need not give the same "
+            "numbers on each (`vlocbench platform` on each machine says how they differ)"
+        )
 
 
 def _dask_wait(futures: list[Any], timeout_s: float) -> list[Any]:

@@ -120,6 +120,11 @@ def _run_task(task: EpisodeTask) -> EpisodeOutcome:
     return EpisodeOutcome(task.key, result, time.perf_counter() - t)
 
 
+def worker_platform_id() -> str:
+    """This process's platform id (what a cluster's workers are asked before a run)."""
+    return current_platform().id
+
+
 def run_job(job: Job) -> list[EpisodeOutcome]:
     """Run a job's episodes in this process (the function workers execute): each outcome holds
     its result or, where its episode raised, the traceback, and this process's platform."""
