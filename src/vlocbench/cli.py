@@ -425,7 +425,8 @@ def _cache(args: argparse.Namespace) -> int:
     for e in found:
         changed = time.strftime("%Y-%m-%d", time.localtime(e.modified_s))
         mark = "  unused" if e.path in stale else ""
-        print(f"{e.size_bytes / 1e6:9.0f} MB  {changed}  {e.name}{mark}")
+        made_on = e.platform or "-" * 12  # the platform that made it (vlocbench platform)
+        print(f"{e.size_bytes / 1e6:9.0f} MB  {changed}  {made_on}  {e.name}{mark}")
     total = sum(e.size_bytes for e in found)
     print(
         f"{args.cache}: {sum(e.kind == 'gallery' for e in found)} galleries, "

@@ -103,6 +103,9 @@ def test_cli_lists_marks_and_deletes_only_with_experiments_to_keep(filled, tmp_p
     assert main(["cache", "--cache", str(root)]) == 0
     out = capsys.readouterr().out
     assert "2 galleries, 4 maps" in out and "unused" not in out
+    assert (
+        "------------  galleries/town10-0123456789\n" in out
+    )  # made before platforms were recorded
     assert main(["cache", "--cache", str(root), "--delete"]) == 1
     assert "--keep" in capsys.readouterr().err
     assert main(["cache", "--cache", str(tmp_path / "none")]) == 1

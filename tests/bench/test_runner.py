@@ -6,6 +6,7 @@ from pathlib import Path
 
 import pytest
 
+from vlocbench.bench import cache
 from vlocbench.bench.experiment import load_experiment
 from vlocbench.bench.platform import current_platform, read_platform_file
 from vlocbench.bench.runner import run_experiment
@@ -36,6 +37,7 @@ def test_experiment_runs_end_to_end_and_resumes(tiny):
     made = read_platform_file(map_dir)
     assert made["made_on"]["id"] == made["gallery_made_on"]["id"] == here.id
     assert made["gallery"] == gallery.name
+    assert {e.platform for e in cache.entries(root / "cache")} == {here.id}  # as listed
     recall = [r for r in rows if r.kind == "recall"]
     assert len(recall) == 2 and all(r.metrics.queries > 10 for r in recall)
     assert all(r.metrics.recall[3] > 0.5 for r in recall)  # it localizes on its own map

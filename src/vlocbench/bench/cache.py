@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Literal
 
 from vlocbench.bench.experiment import ExperimentPlan
+from vlocbench.bench.platform import read_platform_file
 from vlocbench.loc.gallery import GALLERY_FILE, Gallery
 from vlocbench.locks import unless_building
 
@@ -27,6 +28,12 @@ class CacheEntry:
     path: Path
     size_bytes: int
     modified_s: float  # the newest file's modification time, seconds since the epoch
+
+    @property
+    def platform(self) -> str | None:
+        """The id of the platform that made it (None: made before platforms were recorded)."""
+        made = read_platform_file(self.path).get("made_on")
+        return made["id"] if made else None
 
     @property
     def name(self) -> str:
