@@ -32,6 +32,7 @@ from vlocbench.bench.runs import Experiment, stored_episodes
 from vlocbench.bench.store import EpisodeRow, StoreError, read_episode_table
 from vlocbench.bench.worker import run_job
 from vlocbench.errors import ConfigError, UnknownNameError
+from vlocbench.loc.mapping import MAP_FILE
 
 # what a drive measures of the machine, not of the drive: never the same twice
 _TIMING_METRICS = ("ct_", "wall_time_s")  # name prefixes: ct_mean_s, ct_matching_ms, ...
@@ -151,7 +152,7 @@ def _on_its_map(task: EpisodeTask, row: EpisodeRow) -> EpisodeTask:
     map_dir = row.config.get("map_dir")
     if not map_dir:
         return task
-    if not (Path(map_dir) / "map.json").is_file():
+    if not (Path(map_dir) / MAP_FILE).is_file():
         raise StoreError(
             f"episode {row.key} was driven on the map {map_dir}, which is no longer there: "
             "run the experiment (it builds its maps again) or restore the cache"
