@@ -5,7 +5,7 @@ import pyarrow.parquet as pq
 import pytest
 
 from vlocbench.bench.platform import current_platform
-from vlocbench.bench.store import EPISODES_DIR
+from vlocbench.bench.store import DB_FILE, EPISODES_DIR, StoreError
 from vlocbench.bench.verify import verify_episodes
 from vlocbench.errors import ConfigError, UnknownNameError
 
@@ -42,7 +42,10 @@ def test_a_stored_result_unlike_its_drive_is_found_where_it_differs(tiny, tmp_pa
     assert v.differences[0].startswith("trajectory step 7 (t = 0.35 s) first differs, in true_x_m")
 
 
-def test_bad_choices_are_named(tiny):
+def test_bad_choices_are_named(tiny, tmp_path):
+    import shutil
+    import sqlite3
+
     root, _ = tiny
     with pytest.raises(
         UnknownNameError,
@@ -55,3 +58,13 @@ def test_bad_choices_are_named(tiny):
         verify_episodes(root / "out", methods=["orb"])
     with pytest.raises(ConfigError, match="--key: no finished episode of this store has key x"):
         verify_episodes(root / "out", keys=["x"])
+    # an episode whose map is no longer in the cache cannot be driven as it was
+    shutil.copytree(root / "out", tmp_path / "out")
+    with sqlite3.connect(tmp_path / "out" / DB_FILE) as db:
+        [(key,)] = db.execute("SELECT key FROM episodes WHERE kind = 'failure' LIMIT 1").fetchall()
+        db.execute(
+            "UPDATE episodes SET config = json_set(config, '$.map_dir', ?) WHERE key = ?",
+            (str(tmp_path / "gone"), key),
+        )
+    with pytest.raises(StoreError, match=f"map {tmp_path / 'gone'}, which is no longer there"):
+        verify_episodes(tmp_path / "out", keys=[key])
