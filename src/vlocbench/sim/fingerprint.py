@@ -1,10 +1,11 @@
 """What this machine's renderer draws: a digest of a fixed scene's pixels, and the driver's name.
 
 One machine renders the same scene and pose to the same pixels, every time. Another OpenGL driver
-need not: softpipe draws a town01-like street a level or so off llvmpipe's at 44 % of an 800x600
-frame's pixels (both Mesa 22.3), a GPU's driver differs again, and a closed-loop drive carries such
-a difference on into other answers, another path and other failures. A result that records this
-digest says which renderer drew its images; two results with the same digest were drawn alike.
+need not: softpipe draws a street of the test town a level or so off llvmpipe's at 44 % of an
+800x600 frame's pixels (both Mesa 22.3), a GPU's driver differs again, and a closed-loop drive
+carries such a difference on into other answers, another path and other failures. A result that
+records this digest says which renderer drew its images; two results with the same digest were
+drawn alike.
 """
 
 from __future__ import annotations
