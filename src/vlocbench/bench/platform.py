@@ -2,8 +2,9 @@
 
 The same config and seed give the same numbers on one machine, to the last digit; on another they
 need not. Its OpenGL driver draws a frame a little differently (:mod:`vlocbench.sim.fingerprint`),
-numpy's, OpenCV's and the BLAS's kernels are chosen by the CPU, and so are PyTorch's (ALIKED and
-XFeat pass through oneDNN's AVX-512 or AVX2 code, or a GPU's), and a closed-loop drive carries a
+numpy's, OpenCV's and the BLAS's kernels are chosen by the CPU, and so are PyTorch's (a fixed
+convolution rounds otherwise through its AVX2 kernels than its AVX-512 ones, and a GPU's
+otherwise again), and a closed-loop drive carries a
 rounding's difference on into other answers and failures. So each worker process computes, once,
 digests of fixed computations on each of them: episodes with the same :attr:`Platform.id` were
 computed alike, and a store whose episodes have several is named as such in its report.
