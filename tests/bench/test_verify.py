@@ -68,3 +68,17 @@ def test_bad_choices_are_named(tiny, tmp_path):
         )
     with pytest.raises(StoreError, match=f"map {tmp_path / 'gone'}, which is no longer there"):
         verify_episodes(tmp_path / "out", keys=[key])
+
+
+def test_an_episode_does_not_depend_on_the_jobs_before_it_in_its_process(tiny):
+    """A worker keeps its town's scene and its last localizers between jobs: each episode driven
+    again after others than it followed in the run (the reverse order, light and dark between)
+    comes back the same."""
+    from vlocbench.bench.store import read_latest_run
+
+    root, _ = tiny
+    rows = [r for r in read_latest_run(root / "out")[1] if r.kind != "baseline"]
+    keys = [r.key for r in sorted(rows, key=lambda r: (r.kind, r.setup), reverse=True)]
+    verdicts = verify_episodes(root / "out", keys=[*keys, keys[0]])
+    assert [v.row.key for v in verdicts] == [*keys, keys[0]]
+    assert all(v.same for v in verdicts), [v.line() for v in verdicts if not v.same]
