@@ -350,6 +350,8 @@ def test_platform_names_this_machine_and_what_a_store_ran_on(tiny, tmp_path, cap
     assert json.loads(out[: out.index("\n}") + 2]) == json.loads(json.dumps(here.to_dict()))
     assert f"3 on {here.id} (this machine's)" in out
     assert "2 on 0123456789ab (not this machine's: ['render'])" in out
+    assert main(["platform", str(tmp_path / "none")]) == 1  # not a store: named
+    assert "holds no vlocbench results" in capsys.readouterr().err
 
 
 def test_verify_drives_stored_episodes_again(tiny, capsys):

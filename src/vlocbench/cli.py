@@ -326,8 +326,9 @@ def _platform(args: argparse.Namespace) -> int:
     from vlocbench.bench.store import count_platforms, read_platforms
 
     here = current_platform()
+    mine = here.to_dict()
     if args.json:
-        print(json.dumps(here.to_dict(), indent=1))
+        print(json.dumps(mine, indent=1))
     else:
         d = here.details
         print(f"platform {here.id}")
@@ -348,7 +349,7 @@ def _platform(args: argparse.Namespace) -> int:
             if platform_id is None:
                 print(f"  {n:6d} stored before platforms were recorded")
                 continue
-            other, mine = records.get(platform_id, {}), here.to_dict()
+            other = records.get(platform_id, {})
             differs = [
                 k for k in ("render", "numeric", "torch", "packages") if other.get(k) != mine[k]
             ]

@@ -17,7 +17,7 @@ import hashlib
 import importlib.util
 import json
 import platform as _machine
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from importlib import metadata
 from pathlib import Path
 from typing import Any
@@ -61,14 +61,8 @@ class Platform:
         return hashlib.sha256(json.dumps(identity).encode()).hexdigest()[:12]
 
     def to_dict(self) -> dict[str, object]:
-        return {
-            "id": self.id,
-            "render": self.render,
-            "numeric": self.numeric,
-            "torch": self.torch,
-            "packages": self.packages,
-            "details": self.details,
-        }
+        """The record as stored: its id and every field."""
+        return {"id": self.id, **asdict(self)}
 
 
 def numeric_fingerprint() -> str:

@@ -221,9 +221,13 @@ def count_platforms(output_dir: str | Path) -> dict[str | None, int]:
         return _platform_counts(db)
 
 
+def _table_columns(db: sqlite3.Connection, table: str) -> set[str]:
+    return {c for _, c, *_ in db.execute(f"PRAGMA table_info({table})")}
+
+
 def _platform_counts(db: sqlite3.Connection) -> dict[str | None, int]:
-    columns = {c for _, c, *_ in db.execute("PRAGMA table_info(episodes)")}
-    column = "platform" if "platform" in columns else "NULL"  # a store from before, read-only
+    # a store from before platforms were recorded, read-only, has no column
+    column = "platform" if "platform" in _table_columns(db, "episodes") else "NULL"
     query = f"SELECT {column}, count(*) FROM episodes WHERE status='ok' GROUP BY 1"
     return dict(db.execute(query).fetchall())
 
@@ -284,8 +288,7 @@ class ResultStore:
             self.db.execute("PRAGMA journal_mode=WAL")
             self.db.execute("PRAGMA synchronous=FULL")
             self.db.executescript(_SCHEMA)
-            columns = {c for _, c, *_ in self.db.execute("PRAGMA table_info(episodes)")}
-            if "platform" not in columns:  # a store from before platforms were recorded
+            if "platform" not in _table_columns(self.db, "episodes"):  # a store from before
                 self.db.execute("ALTER TABLE episodes ADD COLUMN platform TEXT")
             row = self.db.execute("SELECT value FROM meta WHERE key='experiment'").fetchone()
         except sqlite3.DatabaseError as exc:

@@ -199,14 +199,14 @@ def _metric_differences(stored: dict[str, Any], again: dict[str, Any]) -> list[s
 def _first_difference(
     what: str, stored: dict[str, Any], again: dict[str, Any], times: Any
 ) -> list[str]:
-    """The first row at which any column differs (and by how much where numeric)."""
+    """The first row at which any column differs, with its stored and its new value."""
     if set(stored) != set(again):
         return [f"{what} columns {sorted(set(stored) ^ set(again))} stored or driven only"]
     n_stored, n_again = (len(next(iter(t.values()))) if t else 0 for t in (stored, again))
     for i in range(min(n_stored, n_again)):
         for name in sorted(stored):
             a, b = stored[name][i], again[name][i]
-            if not _equal(_plain(a), _plain(b)):
+            if not _equal(a, b):
                 at = f" (t = {float(times[i]):.2f} s)" if times is not None else ""
                 return [f"{what} {i}{at} first differs, in {name}: {_short(a)} -> {_short(b)}"]
     if n_stored != n_again:
