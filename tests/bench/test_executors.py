@@ -113,8 +113,8 @@ def test_a_killed_or_interrupted_run_leaves_no_process_and_a_consistent_store(
     while _committed(tmp_path / "out" / DB_FILE) < 2 and time.monotonic() < deadline:
         time.sleep(0.2)
     driver.send_signal(how)
-    code = driver.wait(timeout=30)
-    assert code == (-signal.SIGKILL if how == signal.SIGKILL else 130), driver.stderr.read()
+    _, err = driver.communicate(timeout=30)  # reads and closes the pipe
+    assert driver.returncode == (-signal.SIGKILL if how == signal.SIGKILL else 130), err
     deadline = time.monotonic() + 30  # a worker still starting up notices once it has started
     while _alive(workers) and time.monotonic() < deadline:
         time.sleep(0.2)
@@ -180,7 +180,8 @@ def test_an_interrupted_dask_run_leaves_the_cluster_idle(tmp_path, control, dask
             assert time.monotonic() < deadline, "the run never started"
             time.sleep(0.1)
         driver.send_signal(signal.SIGTERM)
-        assert driver.wait(timeout=30) == 130, driver.stderr.read()
+        _, err = driver.communicate(timeout=30)  # reads and closes the pipe
+        assert driver.returncode == 130, err
         # the episodes in flight finish (2 s); none of the queued ones starts
         deadline = time.monotonic() + 20
         while client.run_on_scheduler(lambda dask_scheduler: len(dask_scheduler.tasks)):
