@@ -25,3 +25,7 @@ for _ in range(20):
     image = sim.render([cam])[0].image
 print(f"render {image.shape}: {1000 * (time.perf_counter() - t) / 20:.1f} ms a frame")
 PY
+# what this machine computes (bench.platform: its GL driver's pixels, its CPU's kernels, torch on
+# the GPU), to set beside the CPU machines' records with `vlocbench platform --json` here
+python3 -m vlocbench.cli platform --json > "${OUT:-/tmp}/platform.json" \
+  || echo "no platform record: vlocbench platform failed (above)"
