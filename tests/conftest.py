@@ -155,8 +155,7 @@ def assert_stops_cleanly(proc, stop: int, code: int) -> str:
     """Send ``stop`` to the subprocess ``proc`` (stderr piped, text): it exits with ``code`` and
     prints no native stack trace (glog's failure handler). Returns its stderr."""
     proc.send_signal(stop)
-    got = proc.wait(timeout=60)
-    err = proc.stderr.read()
-    assert got == code, err
+    _, err = proc.communicate(timeout=60)  # reads its pipes to the end and closes them
+    assert proc.returncode == code, err
     assert "Aborted" not in err and "stack trace" not in err, err
     return err

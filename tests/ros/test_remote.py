@@ -4,7 +4,7 @@ import signal
 import numpy as np
 import pytest
 
-from tests.conftest import CAMERA
+from tests.conftest import CAMERA, assert_stops_cleanly
 from tests.ros.conftest import start_localize_node
 from vlocbench.bench import EpisodeConfig, run_episode
 from vlocbench.bench.methods import RosEndpoint
@@ -17,8 +17,7 @@ def node(ros_env, sift_map):
     """Our localization node on the small town's map, in its own process."""
     proc = start_localize_node(sift_map[0], ros_env, localization_frequence=50.0)
     yield proc
-    proc.send_signal(signal.SIGINT)
-    assert proc.wait(timeout=30) == 0, proc.stderr.read()
+    assert_stops_cleanly(proc, signal.SIGINT, 0)
 
 
 def test_a_ros_node_drives_like_the_same_method_in_process(node, small_sim, stretch, sift_map):
