@@ -250,3 +250,33 @@ def test_a_minimum_track_length_drops_the_two_view_points_and_rekeys_only_when_s
     assert min(p.track.length() for p in kept.points3D.values()) == 3
     with pytest.raises(ConfigError, match=r"mapping\.min_track_length"):
         MappingConfig(min_track_length=1)
+
+
+def test_a_map_built_on_one_thread_is_the_map_built_on_every_core(gallery, sift_map, monkeypatch):
+    """A map's cache is keyed by what determines it, not by the machine that built it: pycolmap
+    triangulates and adjusts on every core by default, and one thread gives the same points to
+    the last digit (as 2, 8 and 16 did when measured)."""
+    import pycolmap
+
+    from vlocbench.loc import mapping
+
+    every_core = pycolmap.IncrementalPipelineOptions
+
+    def one_thread() -> pycolmap.IncrementalPipelineOptions:
+        options = every_core()
+        options.num_threads = 1
+        return options
+
+    monkeypatch.setattr(mapping.pycolmap, "IncrementalPipelineOptions", one_thread)
+    out = sift_map[0].parent / "sift-one-thread"
+    build_map(gallery, method_conf("sift"), out)
+
+    def points(map_dir):
+        rec = pycolmap.Reconstruction(map_dir / "sfm")
+        return [
+            (p.xyz.tolist(), sorted((e.image_id, e.point2D_idx) for e in p.track.elements))
+            for _, p in sorted(rec.points3D.items())
+        ]
+
+    assert every_core().num_threads == -1  # the default the fixture's map was built with
+    assert points(out) == points(sift_map[0]) and len(points(out)) > 100
