@@ -12,6 +12,7 @@ from pathlib import Path
 import pytest
 
 from tests.bench.fakes import CONTROL_ENV, fake_tasks, run_fake
+from tests.conftest import assert_stops_cleanly
 from vlocbench.bench.executors import execute
 from vlocbench.bench.store import DB_FILE, ResultStore
 
@@ -112,9 +113,7 @@ def test_a_killed_or_interrupted_run_leaves_no_process_and_a_consistent_store(
     # a loaded machine outlasts), while the others sleep in the workers
     while _committed(tmp_path / "out" / DB_FILE) < 2 and time.monotonic() < deadline:
         time.sleep(0.2)
-    driver.send_signal(how)
-    _, err = driver.communicate(timeout=30)  # reads and closes the pipe
-    assert driver.returncode == (-signal.SIGKILL if how == signal.SIGKILL else 130), err
+    assert_stops_cleanly(driver, how, -signal.SIGKILL if how == signal.SIGKILL else 130)
     deadline = time.monotonic() + 30  # a worker still starting up notices once it has started
     while _alive(workers) and time.monotonic() < deadline:
         time.sleep(0.2)
@@ -179,9 +178,7 @@ def test_an_interrupted_dask_run_leaves_the_cluster_idle(tmp_path, control, dask
         while not client.processing() or not any(client.processing().values()):
             assert time.monotonic() < deadline, "the run never started"
             time.sleep(0.1)
-        driver.send_signal(signal.SIGTERM)
-        _, err = driver.communicate(timeout=30)  # reads and closes the pipe
-        assert driver.returncode == 130, err
+        assert_stops_cleanly(driver, signal.SIGTERM, 130)
         # the episodes in flight finish (2 s); none of the queued ones starts
         deadline = time.monotonic() + 20
         while client.run_on_scheduler(lambda dask_scheduler: len(dask_scheduler.tasks)):
