@@ -221,6 +221,14 @@ def test_cli_run_and_report_errors(tiny, tmp_path, capsys):
     out = capsys.readouterr().out
     assert "0 episodes run, 3 done before" in out
     assert f"--experiment {root / 'tiny.yaml'})" in out  # how to report the whole experiment
+    # the same part into a new folder, its episodes taken from the first store
+    fresh = [*part[:-1], str(tmp_path / "fresh"), "--no-progress", "--no-report"]
+    assert main([*fresh, "--reuse", str(root / "out")]) == 0
+    assert "0 episodes run, 3 done before (3 of them taken from other stores)" in (
+        capsys.readouterr().out
+    )
+    assert main([*fresh, "--reuse", str(tmp_path / "empty")]) == 1
+    assert f"{tmp_path / 'empty'} holds no vlocbench results" in capsys.readouterr().err
     # the noon part as an experiment of its own: the night's two episodes stay in the store, named
     noon = tmp_path / "noon.yaml"
     noon.write_text(

@@ -210,10 +210,12 @@ def _run(args: argparse.Namespace) -> int:
         workers=args.workers or default_workers(),
         scheduler=args.scheduler,
         progress=not args.no_progress,
+        reuse=args.reuse or (),
     )
     overhead = summary.harness_overhead
+    reused = f" ({summary.reused} of them taken from other stores)" if args.reuse else ""
     print(
-        f"{plan.name}: {summary.finished} episodes run, {summary.skipped} done before, "
+        f"{plan.name}: {summary.finished} episodes run, {summary.skipped} done before{reused}, "
         f"{summary.errors} with errors; {summary.workers_lost} workers died, "
         f"{summary.retried} episodes rerun after it; {summary.wall_s / 60:.1f} min "
         + (
@@ -920,6 +922,14 @@ def _add_experiment_verbs(sub: Any, shared: dict[str, argparse.ArgumentParser]) 
         type=_count,
         help="only the first N failure and odometry-only drives of each setup: a long sweep's "
         "whole shape first, its spread later",
+    )
+    p.add_argument(
+        "--reuse",
+        type=Path,
+        action="append",
+        metavar="OUTPUT",
+        help="another experiment's output folder: its finished episodes that this run shares "
+        "(the same keys) are copied instead of driven again (repeat for more)",
     )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--no-report", action="store_true", help="skip the report")

@@ -23,20 +23,12 @@ import pandas as pd
 from vlocbench.bench.experiment import setup_label_of
 from vlocbench.bench.metrics import PLACE_RADII_M, PLACE_RANKS, RECALL_THRESHOLDS
 from vlocbench.bench.runs import Experiment, stored_episodes
-from vlocbench.bench.store import EpisodeRow, read_episode_table
+from vlocbench.bench.store import EPISODE_COLUMNS, EpisodeRow, read_episode_table
 
-# the columns of each row before its levels and metrics
-ID_COLUMNS = (
-    "key",
-    "kind",
-    "town",
-    "method",
-    "setup",
-    "repetition",
-    "seed",
-    "status",
-    "error",
-    "platform",
+# the columns of each row before its levels and metrics: the store's row but for what is spread
+# (the config's levels, the metrics) or bookkeeping
+ID_COLUMNS = tuple(
+    c for c in EPISODE_COLUMNS if c not in ("config", "metrics", "wall_s", "attempts", "finished")
 )
 _RECALL = [f"{m:g}m_{d:g}deg" for m, d in RECALL_THRESHOLDS]
 # tuple metrics spread over named columns, e.g. recall_0.25m_2deg, place_recall_at5_10m

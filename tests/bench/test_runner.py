@@ -177,3 +177,32 @@ def test_a_store_carried_to_another_platform_is_named_as_its_run_resumes(tiny, t
     with caplog.at_level("WARNING"):  # nothing left to run: nothing to say
         run_experiment(plan, progress=False)
     assert "this machine is platform" not in caplog.text
+
+
+def test_a_run_takes_the_episodes_it_shares_with_another_experiments_store(tiny, tmp_path):
+    """Keys hash what determines an episode, not the experiment: another experiment's store
+    gives the episodes both plan (k = 6 and the odometry line), copied as they are, and only the
+    rest are driven."""
+    import yaml
+
+    from vlocbench.results import episodes
+
+    root, _ = tiny
+    spec = yaml.safe_load((root / "tiny.yaml").read_text())
+    other = {**spec, "name": "other", "sweep": {"illumination.k": [6, 8]}}
+    other["output"] = str(tmp_path / "other")
+    (tmp_path / "other.yaml").write_text(yaml.safe_dump(other))
+    plan = load_experiment(tmp_path / "other.yaml")
+    summary = run_experiment(plan, progress=False, reuse=[root / "out"])
+    assert (summary.total, summary.skipped, summary.reused) == (5, 3, 3)
+    assert (summary.finished, summary.errors) == (2, 0)  # k = 8's recall and failure drives
+    df = episodes(tmp_path / "other", tmp_path / "other.yaml")
+    before = episodes(root / "out", root / "tiny.yaml").set_index("key")
+    shared = df[df.key.isin(before.index)]
+    assert sorted(shared.kind) == ["baseline", "failure", "recall"]
+    assert set(shared.setup) <= {"illumination.k=6", "illumination.k=8"}  # this plan's labels
+    for column in ("failures_per_km", "distance_driven_m", "platform"):
+        assert list(shared[column]) == list(before.loc[shared.key, column]), column
+    assert set(df[~df.key.isin(before.index)].setup) == {"illumination.k=8"}
+    again = run_experiment(plan, progress=False, reuse=[root / "out"])
+    assert (again.skipped, again.reused, again.finished) == (5, 0, 0)

@@ -199,3 +199,57 @@ def test_kill_9_loses_only_the_episode_in_flight(tmp_path):
     assert sorted(p.name for p in (tmp_path / "episodes").iterdir()) == sorted(
         f"k{i}" for i in range(100)
     )
+
+
+def test_another_stores_finished_episodes_are_adopted_as_they_are(tmp_path):
+    a, b = _platform("r" * 16), _platform("s" * 16)
+    src = tmp_path / "src"
+    with ResultStore(src, "other") as store:
+        store.start_run("run1", {"name": "other"}, ["a", "b", "c", "d"])
+        store.write_episode(dataclasses.replace(_row("a"), platform=a.id), synthetic_result(2), a)
+        store.write_episode(_row("b", "error"), None)
+        store.write_episode(dataclasses.replace(_row("c"), platform=b.id), synthetic_result(1), b)
+        store.write_episode(_row("d"), synthetic_result(1))
+    (src / "episodes" / "d").rename(src / "episodes" / "d-lost")  # a damaged store's row
+    with sqlite3.connect(src / DB_FILE) as db:  # as an older vlocbench wrote them
+        db.execute(
+            """UPDATE episodes SET metrics='{"ct_mean_s": NaN, "failures": 2}' WHERE key='c'"""
+        )
+        stored = dict(db.execute("SELECT key, finished FROM episodes"))
+    dst = tmp_path / "dst"
+    with ResultStore(dst, "exp") as store:
+        store.start_run("run1", {"name": "exp"}, ["a", "b", "c", "d", "e"])
+        # the error and the row without its tables are left to run; a key it lacks, too
+        assert store.adopt(src, ["a", "b", "c", "d", "e"]) == ["a", "c"]
+        assert store.done_keys() == {"a", "c"}
+        assert store.adopt(src, ["a", "c"]) == []  # nothing twice
+        # its row as it is (when and where it ran included)
+        with sqlite3.connect(src / DB_FILE) as db:
+            query = "SELECT * FROM episodes WHERE key='a'"
+            assert store.db.execute(query).fetchall() == db.execute(query).fetchall()
+        rows = {r.key: r for r in store.rows()}
+        assert rows["a"].platform == a.id and rows["c"].platform == b.id
+        assert rows["c"].metrics.failures == 2 and np.isnan(rows["c"].metrics.ct_mean_s)
+        assert dict(store.db.execute("SELECT key, finished FROM episodes")) == {
+            k: stored[k] for k in ("a", "c")
+        }
+        assert store.db.execute(
+            "SELECT count(*) FROM episodes WHERE NOT json_valid(metrics)"
+        ).fetchone() == (0,)
+        for name in ("trajectory", "localizations"):
+            for key in ("a", "c"):
+                assert (dst / "episodes" / key / f"{name}.parquet").read_bytes() == (
+                    src / "episodes" / key / f"{name}.parquet"
+                ).read_bytes()
+        with pytest.raises(StoreError, match="this run's own output folder"):
+            store.adopt(dst, ["a"])
+        with pytest.raises(StoreError, match="holds no vlocbench results"):
+            store.adopt(tmp_path / "nothing", ["a"])
+    assert read_platforms(dst) == {a.id: a.to_dict(), b.id: b.to_dict()}
+    # a store from before platforms were recorded gives its episodes without one
+    with sqlite3.connect(src / DB_FILE) as db:
+        db.execute("DROP TABLE platforms")
+        db.execute("ALTER TABLE episodes DROP COLUMN platform")
+    with ResultStore(tmp_path / "dst2", "exp") as store:
+        assert store.adopt(src, ["a"]) == ["a"]
+        assert store.db.execute("SELECT platform FROM episodes").fetchall() == [(None,)]

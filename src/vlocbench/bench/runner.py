@@ -15,7 +15,7 @@ from vlocbench.bench.experiment import EpisodeTask, ExperimentPlan
 from vlocbench.bench.methods import check_methods
 from vlocbench.bench.platform import current_platform
 from vlocbench.bench.preparation import prepare_maps
-from vlocbench.bench.store import ResultStore, StoreError, run_hash
+from vlocbench.bench.store import ResultStore, StoreError, read_map_dirs, run_hash
 from vlocbench.bench.worker import run_job
 from vlocbench.config import to_dict
 
@@ -27,6 +27,7 @@ class RunSummary:
     output_dir: Path
     total: int
     skipped: int  # finished in an earlier run
+    reused: int  # of them, taken from other experiments' stores in this run (``reuse``)
     finished: int
     errors: int
     retried: int  # episodes rerun after their worker died
@@ -60,9 +61,12 @@ def run_experiment(
     progress: bool = True,
     runner: Runner = run_job,
     share_drives: bool = True,
+    reuse: Sequence[str | Path] = (),
 ) -> RunSummary:
     """Run what the store of ``plan.output_dir`` does not have yet; returns the counts.
-    ``share_drives=False`` drives every recall episode on its own (see
+    ``reuse``: output folders of other experiments whose finished episodes this plan shares
+    (the same keys: the same towns, conditions, methods, maps and seeds) are copied from them
+    instead of driven again. ``share_drives=False`` drives every recall episode on its own (see
     :mod:`vlocbench.bench.shared_drive`), for measuring what sharing saves."""
     check_workers(workers)  # before hours of gallery and map building, not after
     check_methods(plan.spec.methods)
@@ -75,13 +79,16 @@ def run_experiment(
         _check_galleries(tasks, store)
         keys = [t.key for t in tasks]
         store.start_run(run_hash(keys), to_dict(plan), keys)
+        reused = sum(_reuse(plan, tasks, store, Path(source)) for source in reuse)
         done = store.done_keys()
         todo = [t for t in tasks if t.key not in done]
         if todo:
             _check_platform(plan, store)
         logger.info(
             f"{plan.name}: {len(tasks)} episodes over {len(plan.setups)} setup(s); "
-            f"{len(tasks) - len(todo)} already done, {len(todo)} to run"
+            f"{len(tasks) - len(todo)} already done"
+            + (f" ({reused} of them taken from other stores)" if reuse else "")
+            + f", {len(todo)} to run"
         )
         t1 = time.perf_counter()
         e = execute(
@@ -97,6 +104,7 @@ def run_experiment(
             output_dir=plan.output_dir,
             total=len(tasks),
             skipped=len(tasks) - len(todo),
+            reused=reused,
             finished=e.finished,
             errors=e.errors,
             retried=e.retried,
@@ -123,6 +131,25 @@ def _check_galleries(tasks: Sequence[EpisodeTask], store: ResultStore) -> None:
                 f"{Path(t.map_dir).parent.name}: the gallery was captured again with other "
                 "content. Run into another output folder, or restore the cache it was driven with"
             )
+
+
+def _reuse(
+    plan: ExperimentPlan, tasks: Sequence[EpisodeTask], store: ResultStore, source: Path
+) -> int:
+    """Copy into ``store`` the episodes of ``tasks`` that the store in ``source`` finished and
+    it has not; those driven on another capture of a gallery than the cache's are left to run
+    (as :func:`_check_galleries` would refuse them). Returns how many it copied."""
+    driven_on = read_map_dirs(source)
+    keys = [
+        t.key
+        for t in tasks
+        if not (t.map_dir and t.key in driven_on)
+        or Path(driven_on[t.key]).parent.name == Path(t.map_dir).parent.name
+    ]
+    copied = store.adopt(source, keys)
+    if copied:
+        logger.info(f"{plan.name}: {len(copied)} episodes taken from {source} (the same keys)")
+    return len(copied)
 
 
 def _check_platform(plan: ExperimentPlan, store: ResultStore) -> None:

@@ -24,9 +24,10 @@ import os
 import shutil
 import sqlite3
 import time
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -55,6 +56,23 @@ CREATE TABLE IF NOT EXISTS run_episodes (
     run_hash TEXT NOT NULL, key TEXT NOT NULL, PRIMARY KEY (run_hash, key));
 CREATE TABLE IF NOT EXISTS platforms (id TEXT PRIMARY KEY, record TEXT NOT NULL);
 """
+EPISODE_COLUMNS = (
+    "key",
+    "kind",
+    "town",
+    "method",
+    "setup",
+    "repetition",
+    "seed",
+    "config",
+    "status",
+    "error",
+    "metrics",
+    "wall_s",
+    "attempts",
+    "finished",
+    "platform",
+)
 
 
 class StoreError(VlocbenchError, RuntimeError):
@@ -221,6 +239,17 @@ def count_platforms(output_dir: str | Path) -> dict[str | None, int]:
         return _platform_counts(db)
 
 
+def _map_dirs(db: sqlite3.Connection) -> dict[str, str]:
+    query = "SELECT key, json_extract(config, '$.map_dir') FROM episodes WHERE status='ok'"
+    return {k: m for k, m in db.execute(query) if m}
+
+
+def read_map_dirs(output_dir: str | Path) -> dict[str, str]:
+    """The map folder each finished episode was driven with, by key (those with a map)."""
+    with _read_only(output_dir) as db:
+        return _map_dirs(db)
+
+
 def _table_columns(db: sqlite3.Connection, table: str) -> set[str]:
     return {c for _, c, *_ in db.execute(f"PRAGMA table_info({table})")}
 
@@ -359,8 +388,7 @@ class ResultStore:
 
     def stored_map_dirs(self) -> dict[str, str]:
         """The map folder each finished episode was driven with, by key (those with a map)."""
-        query = "SELECT key, json_extract(config, '$.map_dir') FROM episodes WHERE status='ok'"
-        return {k: m for k, m in self._conn.execute(query) if m}
+        return _map_dirs(self._conn)
 
     def episode_dir(self, key: str) -> Path:
         return self.root / EPISODES_DIR / key
@@ -374,51 +402,77 @@ class ResultStore:
         """Write one episode atomically (its tables first, then its row and its platform's
         record, whose id ``row.platform`` names)."""
         if result is not None:
-            self._write_tables(row.key, result)
+            self._place_folder(row.key, lambda tmp: _write_tables(tmp, result))
         with self._transaction(f"episode {row.key}") as db:
             if platform is not None:
-                db.execute(
-                    "INSERT OR IGNORE INTO platforms VALUES (?, ?)",
-                    (platform.id, strict_json(platform.to_dict())),
-                )
-            columns = {
-                "key": row.key,
-                "kind": row.kind,
-                "town": row.town,
-                "method": row.method,
-                "setup": row.setup,
-                "repetition": row.repetition,
-                "seed": row.seed,
-                "config": strict_json(row.config),
-                "status": row.status,
-                "error": row.error,
-                "metrics": None if row.metrics is None else strict_json(asdict(row.metrics)),
-                "wall_s": row.wall_s,
-                "attempts": row.attempts,
-                "finished": time.time(),
-                "platform": row.platform,
-            }
-            db.execute(
-                f"INSERT OR REPLACE INTO episodes ({', '.join(columns)}) "
-                f"VALUES ({', '.join(':' + c for c in columns)})",
-                columns,
+                _insert_platform(db, platform.id, strict_json(platform.to_dict()))
+            _insert_episode(
+                db,
+                {
+                    "key": row.key,
+                    "kind": row.kind,
+                    "town": row.town,
+                    "method": row.method,
+                    "setup": row.setup,
+                    "repetition": row.repetition,
+                    "seed": row.seed,
+                    "config": strict_json(row.config),
+                    "status": row.status,
+                    "error": row.error,
+                    "metrics": None if row.metrics is None else strict_json(asdict(row.metrics)),
+                    "wall_s": row.wall_s,
+                    "attempts": row.attempts,
+                    "finished": time.time(),
+                    "platform": row.platform,
+                },
             )
 
-    def _write_tables(self, key: str, result: EpisodeResult) -> None:
-        import pyarrow as pa
-        import pyarrow.parquet as pq
+    def adopt(self, source: str | Path, keys: Iterable[str]) -> list[str]:
+        """Copy from the store in ``source`` (another experiment's, read without its lock) the
+        episodes among ``keys`` that it finished and this store has not: each as
+        :meth:`write_episode` writes one (its tables, then its row with the platform's record),
+        unchanged (where and when it ran included). A key hashes everything that determines an
+        episode's result, so another experiment's episode of the same key is this one's. Returns
+        the keys copied."""
+        source = Path(source)
+        if source.resolve() == self.root.resolve():
+            raise StoreError(f"{source} is this run's own output folder: nothing to take from it")
+        wanted = sorted(set(keys) - self.done_keys())
+        with _read_only(source) as src:
+            have = _table_columns(src, "episodes")
+            # a store from before platforms were recorded has no column for them
+            select = ", ".join(c if c in have else f"NULL AS {c}" for c in EPISODE_COLUMNS)
+            rows = [
+                dict(zip(EPISODE_COLUMNS, r, strict=True))
+                for k in wanted
+                for r in src.execute(
+                    f"SELECT {select} FROM episodes WHERE key=? AND status='ok'", (k,)
+                )
+            ]
+            ids = {r["platform"] for r in rows} - {None}
+            platforms = dict(src.execute("SELECT id, record FROM platforms")) if ids else {}
+        # a row whose folder is missing (a damaged store) is driven here instead
+        rows = [r for r in rows if (source / EPISODES_DIR / r["key"]).is_dir()]
+        for row in rows:  # an older store's NaN as null (strict_json)
+            for column in ("config", "metrics"):
+                row[column] = strict_json(json.loads(row[column]))
+        for row in rows:
+            key = row["key"]
+            self._place_folder(key, partial(shutil.copytree, source / EPISODES_DIR / key))
+            with self._transaction(f"episode {key}") as db:
+                if row["platform"] in platforms:
+                    _insert_platform(db, row["platform"], platforms[row["platform"]])
+                _insert_episode(db, row)
+        return [r["key"] for r in rows]
 
+    def _place_folder(self, key: str, fill: Callable[[Path], object]) -> None:
+        """An episode's folder, made whole under a temporary name by ``fill(tmp)`` (which creates
+        ``tmp``), then renamed into place."""
         final = self.episode_dir(key)
         tmp = final.with_name(f"{key}.tmp-{os.getpid()}")
-        trajectory, localizations = _columns(result)
         try:
             shutil.rmtree(tmp, ignore_errors=True)
-            tmp.mkdir(parents=True)
-            pq.write_table(
-                pa.table({k: np.asarray(v) for k, v in trajectory.items()}),
-                tmp / "trajectory.parquet",
-            )
-            pq.write_table(pa.table(localizations), tmp / "localizations.parquet")
+            fill(tmp)
             if final.exists():  # left by an attempt killed before its row was committed
                 shutil.rmtree(final)
             os.replace(tmp, final)
@@ -443,6 +497,33 @@ class ResultStore:
     def read_table(self, key: str, name: str) -> dict[str, np.ndarray]:
         """One episode's ``trajectory`` or ``localizations`` table as numpy columns."""
         return read_episode_table(self.root, key, name)
+
+
+def _write_tables(folder: Path, result: EpisodeResult) -> None:
+    """``folder`` (new) with the episode's trajectory and localizations as Parquet."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    trajectory, localizations = _columns(result)
+    folder.mkdir(parents=True)
+    pq.write_table(
+        pa.table({k: np.asarray(v) for k, v in trajectory.items()}),
+        folder / "trajectory.parquet",
+    )
+    pq.write_table(pa.table(localizations), folder / "localizations.parquet")
+
+
+def _insert_platform(db: sqlite3.Connection, platform_id: str, record: str) -> None:
+    db.execute("INSERT OR IGNORE INTO platforms VALUES (?, ?)", (platform_id, record))
+
+
+def _insert_episode(db: sqlite3.Connection, columns: dict[str, Any]) -> None:
+    """An episode's row (:data:`EPISODE_COLUMNS`), replacing a failed attempt's."""
+    db.execute(
+        f"INSERT OR REPLACE INTO episodes ({', '.join(EPISODE_COLUMNS)}) "
+        f"VALUES ({', '.join(':' + c for c in EPISODE_COLUMNS)})",
+        columns,
+    )
 
 
 def read_episode_table(output_dir: str | Path, key: str, name: str) -> dict[str, np.ndarray]:
