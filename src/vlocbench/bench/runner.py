@@ -123,14 +123,24 @@ def _check_galleries(tasks: Sequence[EpisodeTask], store: ResultStore) -> None:
     are not mixed with episodes on the cached one."""
     stored = store.stored_map_dirs()
     for t in tasks:
-        was = stored.get(t.key)
-        if was and t.map_dir and Path(was).parent.name != Path(t.map_dir).parent.name:
+        other = _other_gallery(t, stored.get(t.key))
+        if other:
             raise StoreError(
                 f"{store.root}: episode {t.key} ({t.town}, {t.method_name}) was driven on the "
-                f"gallery {Path(was).parent.name}, while the cache holds "
-                f"{Path(t.map_dir).parent.name}: the gallery was captured again with other "
-                "content. Run into another output folder, or restore the cache it was driven with"
+                f"gallery {other[0]}, while the cache holds {other[1]}: the gallery was captured "
+                "again with other content. Run into another output folder, or restore the cache "
+                "it was driven with"
             )
+
+
+def _other_gallery(task: EpisodeTask, stored_map_dir: str | None) -> tuple[str, str] | None:
+    """(the gallery it was driven on, the cache's) where a stored episode of ``task``, driven on
+    the map in ``stored_map_dir``, was driven on another capture of its gallery than the cache
+    holds (a map's folder lies in its gallery's); else None."""
+    if not (stored_map_dir and task.map_dir):
+        return None
+    was, now = Path(stored_map_dir).parent.name, Path(task.map_dir).parent.name
+    return (was, now) if was != now else None
 
 
 def _reuse(
@@ -140,12 +150,7 @@ def _reuse(
     it has not; those driven on another capture of a gallery than the cache's are left to run
     (as :func:`_check_galleries` would refuse them). Returns how many it copied."""
     driven_on = read_map_dirs(source)
-    keys = [
-        t.key
-        for t in tasks
-        if not (t.map_dir and t.key in driven_on)
-        or Path(driven_on[t.key]).parent.name == Path(t.map_dir).parent.name
-    ]
+    keys = [t.key for t in tasks if not _other_gallery(t, driven_on.get(t.key))]
     copied = store.adopt(source, keys)
     if copied:
         logger.info(f"{plan.name}: {len(copied)} episodes taken from {source} (the same keys)")

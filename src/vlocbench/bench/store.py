@@ -453,11 +453,10 @@ class ResultStore:
             platforms = dict(src.execute("SELECT id, record FROM platforms")) if ids else {}
         # a row whose folder is missing (a damaged store) is driven here instead
         rows = [r for r in rows if (source / EPISODES_DIR / r["key"]).is_dir()]
-        for row in rows:  # an older store's NaN as null (strict_json)
-            for column in ("config", "metrics"):
-                row[column] = strict_json(json.loads(row[column]))
         for row in rows:
             key = row["key"]
+            for column in ("config", "metrics"):  # an older store's NaN as null (strict_json)
+                row[column] = strict_json(json.loads(row[column]))
             self._place_folder(key, partial(shutil.copytree, source / EPISODES_DIR / key))
             with self._transaction(f"episode {key}") as db:
                 if row["platform"] in platforms:
