@@ -206,3 +206,28 @@ def test_a_run_takes_the_episodes_it_shares_with_another_experiments_store(tiny,
     assert set(df[~df.key.isin(before.index)].setup) == {"illumination.k=8"}
     again = run_experiment(plan, progress=False, reuse=[root / "out"])
     assert (again.skipped, again.reused, again.finished) == (5, 0, 0)
+
+
+def test_a_rerun_builds_only_the_maps_its_remaining_episodes_need(tiny, tmp_path):
+    """A store whose episodes are all done, with its galleries in the cache and no map: the rerun
+    builds no map and drives nothing; the map is built when a new setup needs it."""
+    import shutil
+
+    import yaml
+
+    from vlocbench.loc.mapping import MAP_FILE
+
+    root, _ = tiny
+    shutil.copytree(root / "out", tmp_path / "out")
+    shutil.copytree(root / "cache" / "galleries", tmp_path / "cache" / "galleries")
+    spec = yaml.safe_load((root / "tiny.yaml").read_text())
+    spec.update(output=str(tmp_path / "out"), cache=str(tmp_path / "cache"))
+    again = run_experiment(load_experiment(spec), progress=False)
+    assert (again.skipped, again.finished) == (5, 0)
+    assert not list((tmp_path / "cache").rglob(MAP_FILE))
+    spec["sweep"] = {"illumination.k": [0, 6, 8]}
+    more = run_experiment(load_experiment(spec), progress=False)
+    assert (more.skipped, more.finished, more.errors) == (5, 2, 0)
+    [built] = (tmp_path / "cache" / "maps").rglob(MAP_FILE)
+    [before] = (root / "cache" / "maps").rglob(MAP_FILE)
+    assert built.relative_to(tmp_path) == before.relative_to(root)  # the same map's folder

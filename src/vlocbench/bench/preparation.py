@@ -7,7 +7,7 @@ from __future__ import annotations
 import concurrent.futures as cf
 import logging
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from pathlib import Path
 from typing import Any
 
@@ -57,11 +57,17 @@ class StageBars:
 
 
 def prepare_maps(
-    plan: ExperimentPlan, progress: bool = False, workers: int = 1
+    plan: ExperimentPlan,
+    progress: bool = False,
+    workers: int = 1,
+    only: Collection[tuple[str, str]] | None = None,
 ) -> dict[tuple[str, str], str]:
     """Capture each town's gallery and build each method's map, unless the cache has them; returns
-    the map folders by (town, method name). With ``workers`` > 1 the galleries, then the maps, are
-    made side by side in as many processes (a gallery and a map build each use about one core)."""
+    the map folders by (town, method name). ``only``: the (town, method name) pairs whose maps to
+    build (default: all); the others' folders are where their maps lie or would be built, so a
+    run can check its stored episodes before it builds what its remaining ones need. With
+    ``workers`` > 1 the galleries, then the maps, are made side by side in as many processes (a
+    gallery and a map build each use about one core)."""
     spec = plan.spec
     cache = Path(spec.cache).resolve()
     if not (spec.recall or spec.failure) or not any(m.needs_map for m in spec.methods):
@@ -82,16 +88,17 @@ def prepare_maps(
                 mapping = method.mapping or spec.mapping
                 map_dir = default_map_dir(cache / "maps", galleries[town], method.conf, mapping)
                 jobs[(town, method.name)] = (town, galleries[town], method, mapping, map_dir)
+        build = [job for key, job in jobs.items() if only is None or key in only]
         if workers > 1:  # one build per folder: methods that localize differently share a map
-            todo = list(
-                {j[-1]: j for j in jobs.values() if not (j[-1] / MAP_FILE).exists()}.values()
-            )
+            todo = list({j[-1]: j for j in build if not (j[-1] / MAP_FILE).exists()}.values())
             if len(todo) == 1 and pools_matching(todo[0][2].conf):  # its pairs on every worker
                 with worker_pool(workers) as pool:
                     _map(*todo[0], bars, MatchPool(pool, workers))
             else:
                 _in_parallel(_map_job, todo, workers, bars, "maps")
-        return {key: str(_map(*job, bars)) for key, job in jobs.items()}
+        for job in build:
+            _map(*job, bars)
+        return {key: str(job[-1]) for key, job in jobs.items()}
     finally:
         bars.close()
 

@@ -73,8 +73,11 @@ def run_experiment(
     for mismatch in plan.camera_mismatches():
         logger.warning(f"{plan.name}: {mismatch}")
     t0 = time.perf_counter()
+    pool = workers if scheduler is None else 1
     with ResultStore(plan.output_dir, plan.name) as store:
-        maps = prepare_maps(plan, progress, workers if scheduler is None else 1)
+        # the galleries first: the stored episodes are checked against them before any map is
+        # built, and only the maps of episodes still to drive are (hours for a learned method)
+        maps = prepare_maps(plan, progress, pool, only=())
         tasks = [t.on_maps(maps) for t in plan.tasks()]
         _check_galleries(tasks, store)
         keys = [t.key for t in tasks]
@@ -82,14 +85,17 @@ def run_experiment(
         reused = sum(_reuse(plan, tasks, store, Path(source)) for source in reuse)
         done = store.done_keys()
         todo = [t for t in tasks if t.key not in done]
-        if todo:
-            _check_platform(plan, store)
         logger.info(
             f"{plan.name}: {len(tasks)} episodes over {len(plan.setups)} setup(s); "
             f"{len(tasks) - len(todo)} already done"
             + (f" ({reused} of them taken from other stores)" if reuse else "")
             + f", {len(todo)} to run"
         )
+        needed = {(t.town, t.method.name) for t in todo if t.map_dir and t.method}
+        if needed:
+            prepare_maps(plan, progress, pool, only=needed)
+        if todo:
+            _check_platform(plan, store)
         t1 = time.perf_counter()
         e = execute(
             _order(todo),
