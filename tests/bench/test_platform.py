@@ -7,7 +7,12 @@ import numpy as np
 import pytest
 
 from tests.conftest import last_line_in_a_process
-from vlocbench.bench.platform import Platform, current_platform, numeric_fingerprint
+from vlocbench.bench.platform import (
+    Platform,
+    current_platform,
+    numeric_fingerprint,
+    vector_extension,
+)
 from vlocbench.sim.fingerprint import render_fingerprint
 
 
@@ -20,6 +25,17 @@ def test_the_identity_is_the_digests_and_versions_not_the_description():
     here = current_platform()
     assert here.to_dict()["id"] == here.id and here.render and here.numeric
     assert here.packages["numpy"] == np.__version__ and here.details["gl_renderer"]
+
+
+def test_the_cpu_is_named_with_its_widest_vector_extension():
+    """Two machines both called "AMD EPYC" rounded otherwise (AVX-512 kernels against AVX2):
+    the record says which."""
+    assert vector_extension({"fpu", "sse4_2", "avx", "avx2", "avx512f", "avx512bw"}) == "AVX-512"
+    assert vector_extension({"sse4_2", "avx", "avx2", "fma"}) == "AVX2"
+    assert vector_extension({"neon", "asimd"}) == ""
+    if platform.system() == "Linux" and platform.machine() == "x86_64":
+        cpu = current_platform().details["cpu"]
+        assert cpu.rpartition(", ")[2] in ("AVX-512", "AVX2", "AVX", "SSE4.2"), cpu
 
 
 def _numeric_in_a_process(**env):

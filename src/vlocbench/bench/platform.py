@@ -145,12 +145,34 @@ def read_platform_file(folder: Path) -> dict[str, Any]:
 
 
 def _cpu_name() -> str:
-    """The CPU's model name (Linux), else what the platform module gives."""
+    """The CPU's model name and its widest vector instructions (Linux: two machines both called
+    "AMD EPYC" may differ in those, and so in their kernels' rounding), else what the platform
+    module gives."""
+    name, flags = "", set()
     try:
         with open("/proc/cpuinfo") as f:
             for line in f:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
+                key, _, value = line.partition(":")
+                if key.strip() == "model name" and not name:
+                    name = value.strip()
+                elif key.strip() == "flags" and not flags:
+                    flags = set(value.split())
     except OSError:
         pass
-    return _machine.processor() or _machine.machine()
+    name = name or _machine.processor() or _machine.machine()
+    vector = vector_extension(flags)
+    return f"{name}, {vector}" if vector else name
+
+
+def vector_extension(flags: set[str]) -> str:
+    """The widest x86 vector extension among a CPU's ``flags`` (as /proc/cpuinfo lists them),
+    which numpy's, OpenBLAS's and PyTorch's kernels dispatch on; "" where none is listed."""
+    for flag, name in (
+        ("avx512f", "AVX-512"),
+        ("avx2", "AVX2"),
+        ("avx", "AVX"),
+        ("sse4_2", "SSE4.2"),
+    ):
+        if flag in flags:
+            return name
+    return ""
