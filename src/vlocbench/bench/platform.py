@@ -148,7 +148,7 @@ def _cpu_name() -> str:
     """The CPU's model name and its widest vector instructions (Linux: two machines both called
     "AMD EPYC" may differ in those, and so in their kernels' rounding), else what the platform
     module gives."""
-    name, flags = "", set()
+    name, flags = "", set[str]()
     try:
         with open("/proc/cpuinfo") as f:
             for line in f:
