@@ -91,7 +91,7 @@ def run_experiment(
             + (f" ({reused} of them taken from other stores)" if reuse else "")
             + f", {len(todo)} to run"
         )
-        needed = {(t.town, t.method.name) for t in todo if t.map_dir and t.method}
+        needed = {(t.town, t.method.name) for t in todo if t.method and t.method.needs_map}
         if needed:
             prepare_maps(plan, progress, pool, only=needed)
         if todo:
