@@ -1,4 +1,5 @@
-"""A learned map's build in one process against its pairs matched on a pool of worker processes.
+"""A learned map's build in one process against one whose features and matches are made on a pool
+of worker processes.
 
     python benchmarks/bench_map_build.py [--town town10] [--method xfeat-lighterglue]
                                          [--images 60] [--num-pairs 5] [--workers 1,2]
@@ -8,9 +9,9 @@ Takes the first ``--images`` images of the town's gallery (out/cache, as an expe
 them), then builds the method's map from scratch, a warm-up first, ``--repeats`` times for each
 count of ``--workers`` (1: in this process, as before; more: a ``MatchPool`` of that many spawned
 processes, one thread each, started before the timing, as ``vlocbench run`` and
-``vlocbench build-map --workers`` start theirs), and prints the
-median seconds of the whole build and of its matching stage, with each build's pairs and points
-(the same for every count when the matches are).
+``vlocbench build-map --workers`` start theirs), and prints the median seconds of the whole build
+and of its feature and matching stages, with each build's pairs and points (the same for every
+count when the features and matches are).
 """
 
 from __future__ import annotations
@@ -44,7 +45,7 @@ def main() -> None:
     small = gallery.head(args.images, root / "gallery")
     conf, mapping = method_conf(args.method), MappingConfig(num_pairs=args.num_pairs)
     print(f"{args.town}, {args.method}: {len(small)} images, {args.num_pairs} pairs an image")
-    print("workers | build s (median) | matching s (median) | pairs | points")
+    print("workers | build s (median) | features s (median) | matching s (median) | pairs | points")
     for workers in (int(w) for w in args.workers.split(",")):
         with contextlib.ExitStack() as stack:
             executor = stack.enter_context(worker_pool(workers)) if workers > 1 else None
@@ -54,8 +55,13 @@ def main() -> None:
                 for _ in range(args.repeats + 1)  # the first warms up (the pool's imports too)
             ][1:]
         total = statistics.median(sum(b.seconds.values()) for b in builds)
-        matching = statistics.median(b.seconds["matching"] for b in builds)
-        print(f"{workers} | {total:.1f} | {matching:.1f} | {builds[0].pairs} | {builds[0].points}")
+        stage = {
+            s: statistics.median(b.seconds[s] for b in builds) for s in ("features", "matching")
+        }
+        print(
+            f"{workers} | {total:.1f} | {stage['features']:.1f} | {stage['matching']:.1f} | "
+            f"{builds[0].pairs} | {builds[0].points}"
+        )
 
 
 if __name__ == "__main__":

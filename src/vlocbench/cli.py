@@ -757,7 +757,7 @@ def _add_map_verbs(sub: Any, shared: dict[str, argparse.ArgumentParser]) -> None
         "--workers",
         type=_count,
         default=1,
-        help="processes that match a network matcher's pairs (the same matches as one)",
+        help="processes that extract a learned map's features and match its pairs (the same as one)",
     )
     p.add_argument("--overwrite", action="store_true", help="recompute cached stages")
     p.set_defaults(func=_build_map)

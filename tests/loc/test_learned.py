@@ -264,12 +264,13 @@ def test_the_compute_fingerprint_follows_the_cpus_kernels_not_the_process():
     assert last_line_in_a_process(code, ATEN_CPU_CAPABILITY="default") != here
 
 
-def test_a_learned_maps_pairs_matched_in_a_pool_are_the_drivers_matches(
+def test_a_learned_maps_features_and_matches_made_in_a_pool_are_the_drivers(
     offline, gallery, tmp_path_factory, monkeypatch
 ):
-    """A single map build spreads its LighterGlue pairs over pool processes (``vlocbench build-map
-    --workers 2`` here, a run's workers in ``prepare_maps``): chunk by chunk, each pair on one
-    thread, so the matches (and the map) are those of the build in one process."""
+    """A single map build spreads its images' extraction and its LighterGlue pairs over pool
+    processes (``vlocbench build-map --workers 2`` here, a run's workers in ``prepare_maps``):
+    chunk by chunk, each image and pair on one thread, so the features, the matches and the map
+    are those of the build in one process."""
     import h5py
 
     from vlocbench.cli import main
@@ -282,17 +283,32 @@ def test_a_learned_maps_pairs_matched_in_a_pool_are_the_drivers_matches(
     conf, pairs = method_conf("xfeat-lighterglue"), mapping.MappingConfig(num_pairs=3)
     assert mapping.pools_matching(conf) and not mapping.pools_matching(method_conf("sift"))
     monkeypatch.setattr(mapping, "MATCH_CHUNK", 4)  # several chunks in flight at once
+    monkeypatch.setattr(mapping, "EXTRACT_CHUNK", 3)
     alone = mapping.build_map(small, conf, tmp_path / "alone", pairs)
     pools, real_pool = [], mapping.MatchPool
     monkeypatch.setattr(mapping, "MatchPool", lambda ex, n: pools.append(n) or real_pool(ex, n))
+
+    def not_here(name: str) -> None:
+        raise AssertionError(f"{name} loaded in the driver: the pool should extract and match")
+
+    monkeypatch.setattr(mapping, "build_features", not_here)
+    monkeypatch.setattr(mapping, "build_matcher", not_here)
     pooled = [str(small.root), "--method", "xfeat-lighterglue", "--num-pairs", "3"]
     assert main(["build-map", *pooled, "--workers", "2", "--out", str(tmp_path / "pooled")]) == 0
     assert pools == [2]
     report = mapping.build_map(small, conf, tmp_path / "pooled", pairs)  # finished: its report
     assert report.points == alone.points > 100 and report.pairs == alone.pairs
-    with (
-        h5py.File(tmp_path / "alone" / "matches.h5") as a,
-        h5py.File(tmp_path / "pooled" / "matches.h5") as b,
-    ):
-        assert sorted(a) == sorted(b) and len(a) == alone.pairs
-        assert all(np.array_equal(a[k][()], b[k][()]) for k in a)
+    for name, count in (("features.h5", len(small)), ("matches.h5", alone.pairs)):
+        with h5py.File(tmp_path / "alone" / name) as a, h5py.File(tmp_path / "pooled" / name) as b:
+            assert sorted(a) == sorted(b) and len(a) == count
+            assert all(_same_h5(a[k], b[k]) for k in a)
+
+
+def _same_h5(a: object, b: object) -> bool:
+    """Whether two HDF5 datasets, or groups of them, hold the same arrays."""
+    import h5py
+
+    if isinstance(a, h5py.Group) and isinstance(b, h5py.Group):
+        return sorted(a) == sorted(b) and all(_same_h5(a[k], b[k]) for k in a)
+    assert isinstance(a, h5py.Dataset) and isinstance(b, h5py.Dataset)
+    return np.array_equal(a[()], b[()])

@@ -91,7 +91,8 @@ def prepare_maps(
         build = [job for key, job in jobs.items() if only is None or key in only]
         if workers > 1:  # one build per folder: methods that localize differently share a map
             todo = list({j[-1]: j for j in build if not (j[-1] / MAP_FILE).exists()}.values())
-            if len(todo) == 1 and pools_matching(todo[0][2].conf):  # its pairs on every worker
+            # one learned map alone: its images and pairs on every worker
+            if len(todo) == 1 and pools_matching(todo[0][2].conf):
                 with worker_pool(workers) as pool:
                     _map(*todo[0], bars, MatchPool(pool, workers))
             else:

@@ -24,12 +24,13 @@ import re
 import shutil
 import time
 from collections import deque
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import Executor, Future
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
+from itertools import islice
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, TypeVar
 
 import h5py
 import numpy as np
@@ -37,7 +38,7 @@ import numpy as np
 from vlocbench.config import ADDED_OPTION, config_hash, hashed_values, require, require_one_of
 from vlocbench.errors import LocalizationError
 from vlocbench.geometry import invert_pose
-from vlocbench.loc.features import Features
+from vlocbench.loc.features import FeatureExtractor, Features
 from vlocbench.loc.gallery import CameraModel, Gallery, GalleryWriter
 from vlocbench.loc.matchers import Matcher, match_pairs
 from vlocbench.loc.native import pycolmap, quiet_pycolmap
@@ -54,6 +55,7 @@ from vlocbench.locks import building
 
 MAP_FILE = "map.json"
 MATCH_CHUNK = 64  # pairs matched between writes to the cache (what a kill can lose)
+EXTRACT_CHUNK = 8  # images a job extracts (here, or in a pool process)
 Progress = Callable[[str, int, int], None]  # stage, done, total
 
 
@@ -246,7 +248,10 @@ def _extract(
     store: FeatureStore,
     overwrite: bool,
     progress: Progress | None,
+    pool: MatchPool | None = None,
 ) -> None:
+    """Each gallery image's features into ``store``, ``EXTRACT_CHUNK`` images a job: here, or in
+    ``pool``'s processes (each image on one thread either way, so the same features)."""
     try:
         done = set() if overwrite else store.names()
     except LocalizationError:  # left unreadable by a killed build: extract again
@@ -255,13 +260,18 @@ def _extract(
     todo = [n for n in gallery.names if n not in done]
     if not todo:
         return
-    extractor = build_features(conf.features)
+    chunks = [todo[start : start + EXTRACT_CHUNK] for start in range(0, len(todo), EXTRACT_CHUNK)]
+    extractor = build_features(conf.features) if pool is None else None
+    jobs = ((conf.features, gallery, chunk, extractor) for chunk in chunks)
 
     def items() -> Iterator[tuple[str, Features]]:
-        for k, name in enumerate(todo):
-            yield name, extractor.extract(gallery.load_image(name))
-            if progress:
-                progress("features", k + 1, len(todo))
+        count = 0
+        for (_, _, names, _), feats in _in_order(_extract_chunk, jobs, pool):
+            for name, f in zip(names, feats, strict=True):
+                count += 1
+                yield name, f
+                if progress:
+                    progress("features", count, len(todo))
 
     store.write(items())
 
@@ -306,30 +316,73 @@ def _pairs(
 
 
 def pools_matching(conf: MethodConf) -> bool:
-    """Whether a :class:`MatchPool` matches this method's map: a network matcher (``match_many``),
-    whose passes run on one thread in any process (the same matches), and slowly; the
-    nearest-neighbour matchers are fast, and their matrix products follow BLAS's threads."""
+    """Whether a :class:`MatchPool` builds this method's map (its features and its matches): a
+    network matcher (``match_many``), whose passes run on one thread in any process (the same
+    matches), and slowly, as its learned extractor's; the nearest-neighbour matchers are fast,
+    and their matrix products follow BLAS's threads."""
     return hasattr(matcher_class(conf.matcher), "match_many")
 
 
 @dataclass(frozen=True)
 class MatchPool:
-    """Processes to match a map's pairs in (``workers`` of them, e.g. a ProcessPoolExecutor's)."""
+    """Processes to extract a map's images' features and match its pairs in (``workers`` of them,
+    e.g. a ProcessPoolExecutor's)."""
 
     executor: Executor
     workers: int
 
 
 FeaturePairs = list[tuple[Features, Features]]
-_POOL_MATCHERS: dict[str, Matcher] = {}  # per pool process: each matcher loaded once
+_EXTRACTORS: dict[str, FeatureExtractor] = {}  # per pool process: each network loaded once
+_MATCHERS: dict[str, Matcher] = {}
+Job = TypeVar("Job", bound=tuple[Any, ...])
+Result = TypeVar("Result")
+Net = TypeVar("Net")
 
 
-def _match_chunk(name: str, feats: FeaturePairs) -> list[np.ndarray]:
-    """A chunk of pairs matched in a pool process (each pair on one thread, as in the driver, so
-    the matches are the same)."""
-    if name not in _POOL_MATCHERS:
-        _POOL_MATCHERS[name] = build_matcher(name)
-    return match_pairs(_POOL_MATCHERS[name], feats)
+def _loaded(cache: dict[str, Net], name: str, build: Callable[[str], Net]) -> Net:
+    if name not in cache:
+        cache[name] = build(name)
+    return cache[name]
+
+
+def _extract_chunk(
+    preset: str, gallery: Gallery, names: list[str], extractor: FeatureExtractor | None
+) -> list[Features]:
+    """The features of a chunk of gallery images, by ``extractor`` (the driver's) or, in a pool
+    process, by its own (each image on one thread either way, so the same features)."""
+    if extractor is None:
+        extractor = _loaded(_EXTRACTORS, preset, build_features)
+    return [extractor.extract(gallery.load_image(name)) for name in names]
+
+
+def _match_chunk(name: str, feats: FeaturePairs, matcher: Matcher | None) -> list[np.ndarray]:
+    """The matches of a chunk of pairs, by ``matcher`` (the driver's) or, in a pool process, by
+    its own (each pair on one thread either way, so the same matches)."""
+    if matcher is None:
+        matcher = _loaded(_MATCHERS, name, build_matcher)
+    return match_pairs(matcher, feats)
+
+
+def _in_order(
+    run: Callable[..., Result], jobs: Iterable[Job], pool: MatchPool | None
+) -> Iterator[tuple[Job, Result]]:
+    """``(job, run(*job))`` for each of ``jobs`` in their order: here, or in ``pool``'s processes
+    with two jobs a worker in flight ahead of the one taken (every worker kept busy while the
+    caller writes)."""
+    if pool is None:
+        yield from ((job, run(*job)) for job in jobs)
+        return
+    pending = iter(jobs)
+    ahead: deque[tuple[Job, Future[Result]]] = deque()
+    for job in islice(pending, 2 * pool.workers):
+        ahead.append((job, pool.executor.submit(run, *job)))
+    while ahead:
+        job, future = ahead.popleft()
+        result = future.result()
+        for later in islice(pending, 1):
+            ahead.append((later, pool.executor.submit(run, *later)))
+        yield job, result
 
 
 def _match(
@@ -343,30 +396,16 @@ def _match(
     pool: MatchPool | None = None,
 ) -> dict[tuple[str, str], np.ndarray]:
     """Matches of each pair that agree with the known poses, cached in ``path`` a chunk of
-    ``MATCH_CHUNK`` pairs at a time (a batched matcher gets a chunk at once). With ``pool`` the
-    chunks are matched in its processes, two a worker ahead of the one being written."""
+    ``MATCH_CHUNK`` pairs at a time (a batched matcher gets a chunk at once): here, or in
+    ``pool``'s processes."""
     with _writable_cache(path) as f, features.reading() as read:
         todo = [(a, b) for a, b in pairs if _pair_key(a, b) not in f]
         chunks = [todo[start : start + MATCH_CHUNK] for start in range(0, len(todo), MATCH_CHUNK)]
-        matcher = build_matcher(conf.matcher) if todo and not pool else None
-        ahead: deque[tuple[FeaturePairs, Future[list[np.ndarray]]]] = deque()
-
-        def submit(k: int) -> None:
-            if pool is not None and k < len(chunks):
-                feats = [(read(a), read(b)) for a, b in chunks[k]]
-                ahead.append((feats, pool.executor.submit(_match_chunk, conf.matcher, feats)))
-
-        depth = 2 * pool.workers if pool else 0  # chunks in flight: every worker kept busy
-        for k in range(depth):
-            submit(k)
-        for k, chunk in enumerate(chunks):
-            if matcher is not None:
-                feats = [(read(a), read(b)) for a, b in chunk]
-                found = match_pairs(matcher, feats)
-            else:
-                feats, future = ahead.popleft()
-                found = future.result()
-                submit(k + depth)
+        matcher = build_matcher(conf.matcher) if todo and pool is None else None
+        jobs = ((conf.matcher, [(read(a), read(b)) for a, b in c], matcher) for c in chunks)
+        for k, (chunk, ((_, feats, _), found)) in enumerate(
+            zip(chunks, _in_order(_match_chunk, jobs, pool), strict=True)
+        ):
             for (a, b), (fa, fb), m in zip(chunk, feats, found, strict=True):
                 if len(m):
                     ia, ib = (
@@ -576,7 +615,7 @@ def _build(
     seconds = {}
     t = time.perf_counter()
     features = FeatureStore(out / "features.h5")
-    _extract(gallery, conf, features, overwrite, progress)
+    _extract(gallery, conf, features, overwrite, progress, pool)
     seconds["features"] = time.perf_counter() - t
     t = time.perf_counter()
     descriptors = _global(gallery, conf, out, features, overwrite)
