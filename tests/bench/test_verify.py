@@ -17,7 +17,9 @@ def test_a_stored_episode_driven_again_is_the_same_and_a_changed_drive_is_named(
     [v] = verify_episodes(root / "out", count=1, kinds=["failure"])
     assert v.same is True and v.differences == () and v.same_platform
     assert v.platform == current_platform().id and v.row.kind == "failure"
-    assert v.line().endswith("the same to the last digit (0.0 min)")
+    assert v.line() == f"{v.row.town} sift failure {v.row.setup} rep 0 ({v.row.key}): the same " + (
+        f"to the last digit ({v.wall_s / 60:.1f} min)"  # its own drive's time, whatever the load
+    )
     # the code changes what the key drives (the EKF's variance at a start), the key does not
     monkeypatch.setattr(ekf, "_KNOWN_VAR", 1e-3)
     [v] = verify_episodes(root / "out", keys=[v.row.key])
