@@ -205,9 +205,15 @@ def _run(args: argparse.Namespace) -> int:
     )
     if args.output:
         plan = plan.with_output(args.output)
+    workers = args.workers or default_workers()
+    if args.dry_run:
+        from vlocbench.bench.forecast import forecast
+
+        print("\n".join(forecast(plan, args.reuse or ()).lines(workers)))
+        return 0
     summary = run_experiment(
         plan,
-        workers=args.workers or default_workers(),
+        workers=workers,
         scheduler=args.scheduler,
         progress=not args.no_progress,
         reuse=args.reuse or (),
@@ -933,6 +939,12 @@ def _add_experiment_verbs(sub: Any, shared: dict[str, argparse.ArgumentParser]) 
     )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--no-report", action="store_true", help="skip the report")
+    p.add_argument(
+        "--dry-run",
+        action="store_true",
+        help="make nothing: print the episodes done and left, the galleries and maps to make, "
+        "and the hours the drives would take, from the store's own episode times",
+    )
     p.set_defaults(func=_run)
 
     p = sub.add_parser(

@@ -86,7 +86,7 @@ def prepare_maps(
         for town in spec.towns:
             for method in (m for m in spec.methods if m.needs_map):
                 mapping = method.mapping or spec.mapping
-                map_dir = default_map_dir(cache / "maps", galleries[town], method.conf, mapping)
+                map_dir = _map_dir(plan, cache, galleries[town], method)
                 jobs[(town, method.name)] = (town, galleries[town], method, mapping, map_dir)
         build = [job for key, job in jobs.items() if only is None or key in only]
         if workers > 1:  # one build per folder: methods that localize differently share a map
@@ -102,6 +102,29 @@ def prepare_maps(
         return {key: str(job[-1]) for key, job in jobs.items()}
     finally:
         bars.close()
+
+
+def cached_preparation(
+    plan: ExperimentPlan,
+) -> tuple[dict[str, bool], dict[tuple[str, str], bool]]:
+    """Whether the cache holds each town's gallery, and each (town, method name)'s finished map
+    (not where its town's gallery is missing); nothing is made."""
+    cache = Path(plan.spec.cache).resolve()
+    galleries, maps = {}, {}
+    for town in plan.spec.towns:
+        folder = _gallery_dir(plan, town, cache)
+        galleries[town] = (folder / GALLERY_FILE).exists()
+        gallery = Gallery.load(folder) if galleries[town] else None
+        for method in (m for m in plan.spec.methods if m.needs_map):
+            maps[(town, method.name)] = (
+                gallery is not None and (_map_dir(plan, cache, gallery, method) / MAP_FILE).exists()
+            )
+    return galleries, maps
+
+
+def _map_dir(plan: ExperimentPlan, cache: Path, gallery: Gallery, method: MethodSpec) -> Path:
+    mapping = method.mapping or plan.spec.mapping
+    return default_map_dir(cache / "maps", gallery, method.conf, mapping)
 
 
 def prepare_gallery(plan: ExperimentPlan, town_name: str, progress: bool = False) -> Gallery:
@@ -181,7 +204,7 @@ def _map(
     pool: MatchPool | None = None,
 ) -> Path:
     """The map of ``method`` on the town's ``gallery`` in ``map_dir``, built unless it is there
-    (``pool``: processes that match its pairs)."""
+    (``pool``: processes that extract its features and match its pairs)."""
     name = town_named(town_name).name
     built_here = not (map_dir / MAP_FILE).exists()
     if built_here:
