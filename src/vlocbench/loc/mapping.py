@@ -251,7 +251,8 @@ def _extract(
     pool: MatchPool | None = None,
 ) -> None:
     """Each gallery image's features into ``store``, ``EXTRACT_CHUNK`` images a job: here, or in
-    ``pool``'s processes (each image on one thread either way, so the same features)."""
+    ``pool``'s processes (a learned extractor runs on one thread in any process: the same
+    features)."""
     try:
         done = set() if overwrite else store.names()
     except LocalizationError:  # left unreadable by a killed build: extract again
@@ -350,7 +351,7 @@ def _extract_chunk(
     preset: str, gallery: Gallery, names: list[str], extractor: FeatureExtractor | None
 ) -> list[Features]:
     """The features of a chunk of gallery images, by ``extractor`` (the driver's) or, in a pool
-    process, by its own (each image on one thread either way, so the same features)."""
+    process, by its own."""
     if extractor is None:
         extractor = _loaded(_EXTRACTORS, preset, build_features)
     return [extractor.extract(gallery.load_image(name)) for name in names]
