@@ -1,8 +1,8 @@
 """What a run of an experiment would do, without doing it (``vlocbench run FILE --dry-run``): its
 episodes already in the store or in the stores it would reuse, those left to drive, the galleries
 and maps it would make, and the worker time the drives would take, estimated from the wall times
-of the finished episodes of the store and of those it would reuse. Reads the store without its lock (a run may be writing),
-makes and writes nothing."""
+of the finished episodes of the store and of those it would reuse. Reads the stores without their
+locks (a run may be writing), makes and writes nothing."""
 
 from __future__ import annotations
 
@@ -123,17 +123,17 @@ def forecast(plan: ExperimentPlan, reuse: Sequence[str | Path] = ()) -> Forecast
     todo = [t for t in tasks if t.key not in done]
     galleries, maps = cached_preparation(plan)
     needed = {(t.town, t.method.name) for t in todo if t.method and t.method.needs_map}
+    # as the store names them; once a town (its generation is cached for fewer towns than a set's)
+    name = {t: town_named(t).name for t in plan.spec.towns}
     return Forecast(
         experiment=plan.name,
         output_dir=plan.output_dir,
-        groups=_groups(plan, tasks, done, [*stored.values(), *others.values()]),
+        groups=_groups(plan, name, tasks, done, [*stored.values(), *others.values()]),
         reusable=sum(t.key in others for t in tasks),
         galleries_to_make=tuple(
-            town_named(t).name
-            for t in plan.spec.towns
-            if not galleries[t] and any(p[0] == t for p in needed)
+            name[t] for t in name if not galleries[t] and any(p[0] == t for p in needed)
         ),
-        maps_to_build=tuple(sorted((town_named(t).name, m) for t, m in needed if not maps[t, m])),
+        maps_to_build=tuple(sorted((name[t], m) for t, m in needed if not maps[t, m])),
     )
 
 
@@ -145,11 +145,11 @@ def _finished(output_dir: Path) -> dict[str, EpisodeRow]:
 
 def _groups(
     plan: ExperimentPlan,
+    name: dict[str, str],
     tasks: Sequence[EpisodeTask],
     done: set[str],
     stored: Sequence[EpisodeRow],
 ) -> tuple[EpisodeGroup, ...]:
-    name = {t: town_named(t).name for t in plan.spec.towns}  # as the store names them
     length_m = {name[t]: route_named(t, plan.spec.route_length_m).length_m for t in name}
     seconds: dict[tuple[str, str, str], list[float]] = defaultdict(list)
     per_m: dict[tuple[str, str], list[float]] = defaultdict(list)
