@@ -8,7 +8,7 @@ import yaml
 
 from vlocbench.bench.experiment import load_experiment
 from vlocbench.bench.forecast import forecast
-from vlocbench.bench.store import DB_FILE, read_episodes
+from vlocbench.bench.store import DB_FILE, StoreError, read_episodes
 from vlocbench.config import to_dict
 from vlocbench.sim.town import TownSpec
 
@@ -88,3 +88,5 @@ def test_episodes_another_store_has_are_counted_done_and_the_cli_makes_nothing(t
     out = capsys.readouterr().out
     assert out.startswith(f"tiny ({other}): 5 episodes, 5 done (5 of them to copy from other")
     assert not other.exists() and _stored_state(root) == before
+    with pytest.raises(StoreError, match="holds no vlocbench results"):  # as the run says
+        forecast(load_experiment(root / "more.yaml"), reuse=[root / "no-store"])

@@ -117,7 +117,8 @@ def forecast(plan: ExperimentPlan, reuse: Sequence[str | Path] = ()) -> Forecast
     """What ``vlocbench run`` would do for ``plan`` (with ``reuse``'s stores), read from its
     store and the cache; nothing is made or written."""
     tasks = plan.tasks()
-    stored = _finished(plan.output_dir)
+    stored = _finished(plan.output_dir) if (plan.output_dir / DB_FILE).is_file() else {}
+    # a reuse folder that is not a store is an error, as for the run
     others = {k: r for s in reuse for k, r in _finished(Path(s)).items() if k not in stored}
     done = stored.keys() | others.keys()
     todo = [t for t in tasks if t.key not in done]
@@ -138,8 +139,6 @@ def forecast(plan: ExperimentPlan, reuse: Sequence[str | Path] = ()) -> Forecast
 
 
 def _finished(output_dir: Path) -> dict[str, EpisodeRow]:
-    if not (output_dir / DB_FILE).is_file():
-        return {}
     return {r.key: r for r in read_episodes(output_dir) if r.status == "ok"}
 
 
