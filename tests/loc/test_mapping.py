@@ -27,8 +27,9 @@ def test_unknown_and_broken_methods():
     with pytest.raises(
         UnknownNameError,
         match="aliked-lightglue, aliked-lightglue-gem, aliked-lightglue-threshold, disk-lightglue, "
-        "disk-lightglue-gem, orb-teblid, sift, sift-gem, sift-prior, xfeat-lighterglue, "
-        "xfeat-lighterglue-4096, xfeat-lighterglue-gem",
+        "disk-lightglue-gem, orb-teblid, sift, sift-gem, sift-netvlad, sift-prior, "
+        "xfeat-lighterglue, xfeat-lighterglue-4096, xfeat-lighterglue-gem, "
+        "xfeat-lighterglue-netvlad",
     ):
         method_conf("superpoint")
     with pytest.raises(UnknownNameError, match="dotted path"):
