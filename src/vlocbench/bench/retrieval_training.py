@@ -209,9 +209,12 @@ def train_netvlad(
         positive = same & (dist <= spec.positive_m)
         negative = same & (dist > spec.negative_m)
         usable = train_q[positive[train_q].any(1) & (negative[train_q].sum(1) >= spec.negatives)]
+        held_q = np.flatnonzero(np.isin(data.query_town, held_out))
         report = TrainingReport()
+        # described once an epoch: the held-out recall and the next epoch's mining share them
+        gallery_d, query_d = _describe(params, gallery), _describe(params, queries)
         for epoch in range(spec.epochs):
-            similarity = (_describe(params, queries) @ _describe(params, gallery).T).numpy()
+            similarity = (query_d @ gallery_d.T).numpy()
             losses = []
             order = rng.permutation(usable)
             for start in range(0, len(order), spec.batch):
@@ -234,7 +237,8 @@ def train_netvlad(
                 opt.step()
                 losses.append(float(loss.detach()))
             report.loss.append(float(np.mean(losses)))
-            by_setup = held_out_recall(params, data, held_out, spec.positive_m)
+            gallery_d, query_d = _describe(params, gallery), _describe(params, queries)
+            by_setup = _recall(gallery_d, query_d[held_q], held_q, data, spec.positive_m)
             report.recall.append(by_setup.pop("all", (float("nan"), float("nan"))))
             report.recall_by_setup = by_setup
             r1, r5 = report.recall[-1]
@@ -256,10 +260,18 @@ def held_out_recall(
     import torch
 
     chosen = np.flatnonzero(np.isin(data.query_town, towns))
-    if len(chosen) == 0:
-        return {}
     gallery = _describe(params, torch.from_numpy(data.gallery_maps))
     queries = _describe(params, torch.from_numpy(data.query_maps[chosen]))
+    return _recall(gallery, queries, chosen, data, radius_m)
+
+
+def _recall(
+    gallery: Any, queries: Any, chosen: NDArray[np.int64], data: TrainingSet, radius_m: float
+) -> dict[str, tuple[float, float]]:
+    """:func:`held_out_recall` from descriptors: ``gallery`` of every gallery image, ``queries``
+    of the queries ``chosen``, in that order."""
+    if len(chosen) == 0:
+        return {}
     hits = np.zeros((len(chosen), 2), bool)
     for row, j in enumerate(chosen):
         own = np.flatnonzero(data.gallery_town == data.query_town[j])

@@ -328,7 +328,7 @@ class LightGlueMatcher:
         return not pruning or keypoints <= self.net.pruning_min_kpts(torch.device(self.device))
 
 
-INPUT_NORMS = ("imagenet", "image")  # EfficientNetGem.input_norm
+INPUT_NORMS = ("imagenet", "image")  # EfficientNetLite0.input_norm
 
 
 class EfficientNetLite0:
