@@ -546,6 +546,8 @@ def _train_retrieval(args: argparse.Namespace) -> int:
     from vlocbench.bench.retrieval_training import (
         RetrievalTraining,
         TrainingSet,
+        conditions_from,
+        render_record,
         render_training_set,
         train_netvlad,
     )
@@ -553,20 +555,18 @@ def _train_retrieval(args: argparse.Namespace) -> int:
 
     spec = RetrievalTraining(seed=args.seed, **({"epochs": args.epochs} if args.epochs else {}))
     towns = load_experiment(args.towns)
+    setups = conditions_from(args.conditions)
     if args.data and args.data.is_file():
         data = TrainingSet.load(str(args.data))
+        data.require_rendered_from(render_record(towns, setups, spec), str(args.data))
     else:
-        setups = [
-            (f"{path.stem}: {s.label}", s.conditions)
-            for path in args.conditions
-            for s in load_experiment(path).setups
-        ]
         data = render_training_set(towns, setups, spec, progress=print)
         if args.data:
             data.save(str(args.data))
     params, report = train_netvlad(data, spec, progress=print)
     meta = {
         "spec": dataclasses.asdict(spec),
+        "rendered_with": data.rendered_with,
         "towns": list(data.towns),
         "setups": list(data.setups),
         "gallery_images": len(data.gallery_xy),

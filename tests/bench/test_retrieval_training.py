@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 import torch
@@ -12,7 +14,9 @@ from vlocbench.bench.experiment import load_experiment
 from vlocbench.bench.retrieval_training import (
     RetrievalTraining,
     TrainingSet,
+    conditions_from,
     held_out_recall,
+    render_record,
     render_training_set,
     train_netvlad,
 )
@@ -26,35 +30,44 @@ SPEC = RetrievalTraining(
 
 
 @pytest.fixture(scope="module")
-def training_set(tmp_path_factory):
+def sources(tmp_path_factory):
+    """Two small towns' experiment file and a conditions file (noon and dusk), written."""
     root = tmp_path_factory.mktemp("training")
     towns = []
     for seed in (3, 4):
         path = root / f"small{seed}.yaml"
         path.write_text(yaml.safe_dump({**to_dict(small_spec(seed)), "name": f"small{seed}"}))
         towns.append(str(path))
-    plan = load_experiment(
-        {
-            "name": "training",
-            "towns": towns,
-            "route_length_m": 60,
-            "methods": ["sift"],
-            "gallery": {"camera": {"intrinsics": {"width": 320, "height": 240}}},
-            "cache": str(root / "cache"),
-        }
-    )
-    conditions = load_experiment(
-        {"name": "c", "towns": towns, "methods": ["sift"], "sweep": {"illumination.k": [0, 6]}}
-    )
-    setups = [(s.label, s.conditions) for s in conditions.setups]
-    return render_training_set(plan, setups, SPEC)
+    plan = {
+        "name": "training",
+        "towns": towns,
+        "route_length_m": 60,
+        "methods": ["sift"],
+        "gallery": {"camera": {"intrinsics": {"width": 320, "height": 240}}},
+        "cache": str(root / "cache"),
+    }
+    conditions = {
+        "name": "c",
+        "towns": towns,
+        "methods": ["sift"],
+        "sweep": {"illumination.k": [0, 6]},
+    }
+    (root / "towns.yaml").write_text(yaml.safe_dump(plan))
+    (root / "light.yaml").write_text(yaml.safe_dump(conditions))
+    return root / "towns.yaml", root / "light.yaml"
+
+
+@pytest.fixture(scope="module")
+def training_set(sources):
+    towns, light = sources
+    return render_training_set(load_experiment(towns), conditions_from([light]), SPEC)
 
 
 def test_the_set_holds_each_towns_gallery_and_queries_and_reads_back(training_set, tmp_path):
     data = training_set
     assert data.towns == ("small3", "small4") and data.setups == (
-        "illumination.k=0",
-        "illumination.k=6",
+        "light: illumination.k=0",
+        "light: illumination.k=6",
     )
     assert data.gallery_maps.dtype == np.float16 and data.gallery_maps.shape[1:] == (1280, 3, 5)
     assert set(data.gallery_town) == {0, 1} and set(data.query_town) == {0, 1}
@@ -63,6 +76,8 @@ def test_the_set_holds_each_towns_gallery_and_queries_and_reads_back(training_se
     data.save(str(tmp_path / "set.npz"))
     again = TrainingSet.load(str(tmp_path / "set.npz"))
     assert again.towns == data.towns and again.setups == data.setups
+    assert again.rendered_with == data.rendered_with
+    assert data.rendered_with["width"] == SPEC.width and len(data.rendered_with["sources"]) == 16
     assert np.array_equal(again.query_maps, data.query_maps)
     assert np.array_equal(again.gallery_xy, data.gallery_xy)
 
@@ -99,21 +114,39 @@ def test_bad_training_values_name_the_field(training_set):
         train_netvlad(training_set, RetrievalTraining(validation_towns=2))
 
 
-def test_the_command_trains_from_a_rendered_set_and_records_how(training_set, tmp_path, capsys):
+def test_the_command_trains_from_a_rendered_set_and_records_how(
+    training_set, sources, tmp_path, capsys
+):
     from vlocbench.cli import main
     from vlocbench.loc.netvlad import load_weights, weights_digest
 
+    towns, light = sources
+    argv = ["train-retrieval", str(towns), "--conditions", str(light), "--epochs", "1"]
+    # the fixture's set, rendered with SPEC's values, is refused by a run of the defaults
     data = tmp_path / "set.npz"
     training_set.save(str(data))
-    towns = tmp_path / "towns.yaml"
-    towns.write_text(yaml.safe_dump({"name": "t", "towns": ["town10"], "methods": ["sift"]}))
     out = tmp_path / "head.npz"
-    argv = ["train-retrieval", str(towns), "--conditions", str(towns), "--output", str(out)]
-    assert main([*argv, "--data", str(data), "--epochs", "1"]) == 0  # the set read, not rendered
+    assert main([*argv, "--output", str(out), "--data", str(data)]) == ConfigError.exit_code
+    assert "error: training.query_spacing_m: " in capsys.readouterr().err
+    assert not out.exists()
+    # the same set as a run of the defaults would render it: read, not rendered again
+    default = render_record(load_experiment(towns), conditions_from([light]), RetrievalTraining())
+    dataclasses.replace(training_set, rendered_with=default).save(str(data))
+    assert main([*argv, "--output", str(out), "--data", str(data)]) == 0
     arrays, meta = load_weights(out)
     assert arrays["proj"].shape == (128, 1280) and arrays["centroids"].shape == (32, 128)
     assert meta["towns"] == ["small3", "small4"] and meta["spec"]["epochs"] == 1
+    assert meta["rendered_with"] == default
     assert len(meta["loss"]) == 1 and set(meta["held_out_recall_by_setup"]) == set(
         training_set.setups
     )
     assert f"digest {weights_digest(out)}" in capsys.readouterr().out
+    # other conditions than the set's, or a set that does not say how it was rendered
+    argv[3] = str(towns)  # the conditions of the towns file: noon alone
+    assert main([*argv, "--output", str(out), "--data", str(data)]) == ConfigError.exit_code
+    assert "error: towns and --conditions: " in capsys.readouterr().err
+    arrays = dict(np.load(data))
+    del arrays["rendered_with"]
+    np.savez(data, **arrays)
+    assert main([*argv, "--output", str(out), "--data", str(data)]) == ConfigError.exit_code
+    assert "does not record what it was rendered from" in capsys.readouterr().err

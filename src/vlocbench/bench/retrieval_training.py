@@ -19,18 +19,20 @@ Everything is seeded: the same towns, setups and spec give the same weights on t
 from __future__ import annotations
 
 import dataclasses
+import json
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from vlocbench.bench.experiment import ExperimentPlan
+from vlocbench.bench.experiment import ExperimentPlan, load_experiment
 from vlocbench.bench.preparation import prepare_gallery
 from vlocbench.bench.towns import route_named, town_named
-from vlocbench.config import require
+from vlocbench.config import config_hash, require
 from vlocbench.loc.learned import EfficientNetLite0, _inference
 from vlocbench.loc.netvlad import aggregate, initial_params
 from vlocbench.sim import Conditions, Simulator
@@ -73,12 +75,40 @@ class RetrievalTraining:
         require(self.width >= 32, "training.width", "must be >= 32 pixels")
 
 
+def conditions_from(paths: Sequence[str | Path]) -> list[tuple[str, Conditions]]:
+    """The setups of experiment files as (label, conditions), each label prefixed by its file's
+    stem (``weather: weather.fog_start_m=10``), in the files' order."""
+    return [
+        (f"{Path(path).stem}: {s.label}", s.conditions)
+        for path in paths
+        for s in load_experiment(path).setups
+    ]
+
+
+# The spec's values that shape the rendered set (the others shape only the training).
+RENDER_FIELDS = ("query_spacing_m", "lateral_m", "yaw_sigma_deg", "width", "seed")
+
+
+def render_record(
+    towns: ExperimentPlan, setups: Sequence[tuple[str, Conditions]], spec: RetrievalTraining
+) -> dict[str, Any]:
+    """What a training set is rendered from: ``spec``'s :data:`RENDER_FIELDS` and ``sources``, a
+    digest of the towns' galleries (town, route, gallery drive, scene) and the setups'
+    conditions."""
+    record: dict[str, Any] = {f: getattr(spec, f) for f in RENDER_FIELDS}
+    galleries = [towns.gallery_key(name) for name in towns.spec.towns]
+    record["sources"] = config_hash((galleries, [list(s) for s in setups]), 16)
+    return record
+
+
 @dataclass
 class TrainingSet:
     """Frozen backbone feature maps (float16) of the galleries and queries, with their places:
     ``gallery_maps`` (G, C, H, W), ``gallery_xy`` (G, 2) m, ``gallery_town`` (G,); the same for
-    queries, and ``query_setup`` (Q,), an index into ``setups``."""
+    queries, and ``query_setup`` (Q,), an index into ``setups``. ``rendered_with``: the
+    :func:`render_record` it was rendered from."""
 
+    rendered_with: dict[str, Any]
     towns: tuple[str, ...]
     setups: tuple[str, ...]
     gallery_maps: NDArray[np.float16]
@@ -92,16 +122,38 @@ class TrainingSet:
     def save(self, path: str) -> None:
         arrays = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
         arrays["towns"], arrays["setups"] = np.array(self.towns), np.array(self.setups)
+        arrays["rendered_with"] = np.array(json.dumps(self.rendered_with, sort_keys=True))
         with open(path, "wb") as fh:
             np.savez(fh, **arrays)
 
     @classmethod
     def load(cls, path: str) -> TrainingSet:
         with np.load(path, allow_pickle=False) as data:
+            require(
+                "rendered_with" in data.files,
+                "--data",
+                f"{path} does not record what it was rendered from (a set written before "
+                "2026-12-07): render it again into a new file",
+            )
             values = {f.name: data[f.name] for f in dataclasses.fields(cls)}
+        values["rendered_with"] = json.loads(str(values["rendered_with"]))
         values["towns"] = tuple(str(t) for t in values["towns"])
         values["setups"] = tuple(str(s) for s in values["setups"])
         return cls(**values)
+
+    def require_rendered_from(self, record: dict[str, Any], path: str) -> None:
+        """Refuse a set rendered otherwise than ``record`` (a :func:`render_record`) asks, naming
+        the first value that differs: trained on, it would be recorded under values it was not
+        rendered with."""
+        for name, wanted in record.items():
+            had = self.rendered_with.get(name)
+            field = "towns and --conditions" if name == "sources" else f"training.{name}"
+            require(
+                had == wanted,
+                field,
+                f"{path} was rendered with {name} = {had}, this run asks for {wanted}: pass the "
+                "same values, or another --data path to render a new set",
+            )
 
 
 @dataclass
@@ -124,6 +176,7 @@ def render_training_set(
     """The galleries of ``towns``'s towns (captured into its cache unless there) and queries
     along each route under ``setups`` ((label, conditions), one drawn per query)."""
     require(len(setups) > 0, "conditions", "needs at least one setup")
+    record = render_record(towns, setups, spec)
     rng = np.random.default_rng(spec.seed)
     backbone = EfficientNetLite0(spec.width, "imagenet", "cpu")
 
@@ -165,6 +218,7 @@ def render_training_set(
                 q["setup"].append(drawn[j])
         progress(f"{town.name}: {len(gallery)} gallery images, {count} queries")
     return TrainingSet(
+        rendered_with=record,
         towns=tuple(names),
         setups=tuple(label for label, _ in setups),
         gallery_maps=np.stack(g["maps"]),
