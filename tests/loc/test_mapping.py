@@ -162,6 +162,49 @@ def test_a_map_build_killed_mid_write_is_finished_by_a_rerun(gallery, tmp_path):
     assert json.loads((out / "map.json").read_text())["stages"]["features"][0].endswith("Extractor")
 
 
+KILLED_MID_MATCHING = """
+import os, sys
+from vlocbench.loc import mapping
+from vlocbench.loc.gallery import Gallery
+from vlocbench.loc.registry import method_conf
+
+mapping.MATCH_CHUNK = 4
+calls = 0
+def match_pairs(matcher, pairs):
+    global calls
+    calls += 1
+    if calls == 3:
+        os._exit(137)  # as a kill -9: no clean-up, the cache file left open
+    return real(matcher, pairs)
+real, mapping.match_pairs = mapping.match_pairs, match_pairs
+mapping.build_map(Gallery.load(sys.argv[1]), method_conf("sift"), sys.argv[2])
+"""
+
+
+def test_a_map_build_killed_while_matching_keeps_the_pairs_it_matched(
+    gallery, tmp_path, monkeypatch
+):
+    import subprocess
+    import sys
+
+    import h5py
+
+    from vlocbench.loc import mapping
+
+    out = tmp_path / "map"
+    child = [sys.executable, "-c", KILLED_MID_MATCHING, str(gallery.root), str(out)]
+    assert subprocess.run(child, check=False).returncode == 137
+    with h5py.File(out / "matches.h5", "r") as f:  # readable, with the two chunks before the kill
+        assert len(f.keys()) == 8
+    pairs = len((out / "pairs.txt").read_text().splitlines())
+    matched = []
+    real = mapping.match_pairs
+    monkeypatch.setattr(mapping, "match_pairs", lambda m, p: matched.append(len(p)) or real(m, p))
+    again = build_map(gallery, method_conf("sift"), out)
+    assert sum(matched) == pairs - 8  # the rerun matched only what the kill left
+    assert again.points == build_map(gallery, method_conf("sift"), tmp_path / "whole").points
+
+
 def test_a_gallery_goes_to_colmap_and_back_unchanged(gallery, tmp_path):
     import pycolmap
 

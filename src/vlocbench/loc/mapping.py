@@ -298,6 +298,7 @@ def _global(
         for name in gallery.names:
             if name not in f:
                 f[name] = descriptor.describe(gallery.load_image(name), read(name))
+                f.flush()
         return np.stack([f[n][()] for n in gallery.names])
 
 
@@ -421,6 +422,7 @@ def _match(
                     )
                     m = m[verified(mapping, F, fa.keypoints[m[:, 0]], fb.keypoints[m[:, 1]])]
                 f[_pair_key(a, b)] = m.astype(np.uint32).reshape(-1, 2)
+            f.flush()  # unflushed, a kill leaves the file unreadable and every match is lost
             if progress:
                 done = len(pairs) - len(todo) + k * MATCH_CHUNK + len(chunk)
                 progress("matches", done, len(pairs))
