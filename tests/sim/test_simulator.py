@@ -81,3 +81,28 @@ def test_more_traffic_than_the_scene_holds_is_refused_and_changes_nothing(small_
     with pytest.raises(ConfigError, match="traffic"):
         small_sim.set_conditions(Conditions(traffic=Traffic(cars=3)))
     assert (small_sim.conditions, small_sim.traffic) == before
+
+
+def test_the_towns_edge_is_a_wall_no_camera_draws(small_sim, small_town, monkeypatch):
+    from vlocbench.sim import Camera, Extrinsics, Intrinsics
+    from vlocbench.sim.scene import _SceneBuilder
+
+    # a car 10 m outside the town's east edge, driving towards it: nothing else lies out there
+    _, y0, x1, y1 = small_town.extent
+    start = (x1 + 10.0, (y0 + y1) / 2, np.pi)
+    small_sim.teleport(*start)
+    events = []
+    for _ in range(100):
+        events += small_sim.step(Control(throttle=0.6)).collisions
+        if events:
+            break
+    assert [e.category for e in events] == ["edge"], events
+    assert x1 <= events[0].x_m < x1 + 5.0
+    # and a camera looking at it sees what it would without it (drawn, it fills a third)
+    camera = Camera("front", Intrinsics(160, 120, 90.0), Extrinsics(z_m=1.6, yaw_deg=0.0))
+    small_sim.teleport(*start)
+    image = small_sim.render([camera], frame_id=1)[0].image
+    monkeypatch.setattr(_SceneBuilder, "edge", lambda self: None)
+    with Simulator(small_town) as bare:
+        bare.teleport(*start)
+        assert np.array_equal(bare.render([camera], frame_id=1)[0].image, image)

@@ -13,7 +13,8 @@ from vlocbench.sim.scene import TownScene
 class CollisionEvent:
     """The ego car started touching ``label`` at ``time_s`` near (x_m, y_m).
 
-    ``category``: building, tree, pole, parked_car, curb, car (traffic) or pedestrian.
+    ``category``: building, tree, pole, parked_car, curb, edge (the town's), car (traffic) or
+    pedestrian.
     """
 
     time_s: float

@@ -1,9 +1,10 @@
 """The MuJoCo model of a town: merged textured meshes to draw, primitives to collide with.
 
 Static geometry is merged into one mesh per material (few draw calls keep llvmpipe fast); for
-collisions every building, trunk, pole, parked car and sidewalk slab is a primitive (box/cylinder) in
-geom group 4, which cameras never draw. The ego car is a free body (geom group 5, hidden from its
-own cameras) carrying two headlight spots; traffic cars and pedestrians are free bodies in group 3.
+collisions every building, trunk, pole, parked car and sidewalk slab, and a wall around the town's
+extent, is a primitive (box/cylinder) in geom group 4, which cameras never draw. The ego car is a
+free body (geom group 5, hidden from its own cameras) carrying two headlight spots; traffic cars
+and pedestrians are free bodies in group 3.
 
 Collision filtering: static geoms have contype 0, conaffinity 1; the ego has contype 1, conaffinity 0;
 so only ego-vs-world and ego-vs-traffic pairs are ever tested.
@@ -34,6 +35,7 @@ LAMP_REACH_M = 1.7  # from the pole to the head, towards the road
 # bump when the look of the towns changes: galleries and maps (and results) are keyed by it
 # 7: window relief, shop tiles apart, paving in shifted blocks; 8: grass 16 m in blocks
 SCENE_VERSION = 8
+EDGE_WALL_M, EDGE_HEIGHT_M = 2.0, 3.0  # the town's edge: a wall just outside its extent
 GROUND_FLOOR_M = 4.2
 GROUND_SHIFTS = 64  # the moves a ground block's texture may take, per tile (a power of two)
 LOW_WALL_M = 12.0  # walls below: vertices every cell_m (headlights), windows set back
@@ -274,6 +276,21 @@ class _SceneBuilder:
             rgba=[1, 0, 0, 0],
         )
         self.collision.append((category, label))
+
+    def edge(self) -> None:
+        """The town's edge: a wall around its extent to collide with, never drawn. CARLA's towns
+        end in terrain, trees and fences, where a lost car crashes; past ours lies open ground,
+        on which a car whose filter is lost drove on for hundreds of metres without a failure."""
+        x0, y0, x1, y1 = self.town.extent
+        t, h = EDGE_WALL_M / 2, EDGE_HEIGHT_M / 2  # half its thickness and height
+        cx, cy, hx, hy = (x0 + x1) / 2, (y0 + y1) / 2, (x1 - x0) / 2 + EDGE_WALL_M, (y1 - y0) / 2
+        for side, center, half in (
+            ("south", (cx, y0 - t, h), (hx, t, h)),
+            ("north", (cx, y1 + t, h), (hx, t, h)),
+            ("west", (x0 - t, cy, h), (t, hy, h)),
+            ("east", (x1 + t, cy, h), (t, hy, h)),
+        ):
+            self.collide_box("edge", f"the {side} edge", np.array(center), np.array(half))
 
     def roads(self) -> None:
         town = self.town
@@ -710,6 +727,7 @@ class _SceneBuilder:
         self.platforms()
         self.buildings()
         self.props()
+        self.edge()
         season_geoms = self._mesh_geoms()
         spec.worldbody.add_light(
             name="sun",
