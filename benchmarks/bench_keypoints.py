@@ -3,11 +3,13 @@
     python benchmarks/bench_keypoints.py [--town town01] [--features xfeat,xfeat-4096]
                                          [--matcher lighterglue-xfeat] [--k 0,8,10]
                                          [--places 12] [--repeats 3]
+                                         [--viewpoint "8,37.5;13,40"]
 
 At ``--places`` places along the route (half-way between gallery images, as bench_illumination's
 queries), renders the gallery camera at each illumination level k and matches each query with
-the gallery image nearest to it: the true place, the retrieval left out. For each feature preset
-(one keypoint budget each) it prints, per level, the median keypoints and matches, the median and
+the gallery image nearest to it in the ground plane: the true place, the retrieval left out
+(``--viewpoint``: the query camera raised by dz m and pitched down by the given degrees, at noon,
+instead of the light's levels). For each feature preset (one keypoint budget each) it prints, per level, the median keypoints and matches, the median and
 the least over the places of the matches that hloc's check with the known poses keeps (each
 keypoint within 4 px of the other's epipolar line, the maps' verification), and the matcher's
 median time per pair (the first place's pair at the first level, after a warm-up, over
@@ -24,14 +26,14 @@ import time
 
 import numpy as np
 
-from bench_illumination import route_queries
+from bench_illumination import number_pairs, route_queries
 from vlocbench.bench.experiment import load_experiment
 from vlocbench.bench.preparation import prepare_gallery
 from vlocbench.bench.towns import route_named, town_named
 from vlocbench.bench.visual import camera_model
 from vlocbench.loc.mapping import MappingConfig, fundamental_from_poses, verified
 from vlocbench.loc.registry import build_features, build_matcher
-from vlocbench.sim import Conditions, Illumination, Simulator
+from vlocbench.sim import Conditions, Illumination, Simulator, Viewpoint
 
 
 def main() -> None:
@@ -42,6 +44,9 @@ def main() -> None:
     ap.add_argument("--k", default="0,8,10")
     ap.add_argument("--places", type=int, default=12)
     ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument(
+        "--viewpoint", type=number_pairs, help='(dz m, pitch down deg) levels, "8,37.5;13,40"'
+    )
     args = ap.parse_args()
 
     plan = load_experiment({"name": "bench", "towns": [args.town], "methods": ["sift"]})
@@ -57,9 +62,16 @@ def main() -> None:
         "keypoints | matches | matches with the true geometry (median, least) | ms per pair"
     )
     pair_s: dict[str, float] = {}
+    ks = [float(v) for v in args.k.split(",")]
+    levels = [(f"k={k:g}", Conditions(illumination=Illumination(k=k))) for k in ks]
+    if args.viewpoint:
+        levels = [
+            (f"{dz:g} m, {deg:g} deg", Conditions(viewpoint=Viewpoint(dz, deg)))
+            for dz, deg in args.viewpoint
+        ]
     with Simulator(town_named(args.town)) as sim:
-        for k in (float(v) for v in args.k.split(",")):
-            sim.set_conditions(Conditions(illumination=Illumination(k=k)))
+        for label, conditions in levels:
+            sim.set_conditions(conditions)
             rows: dict[str, list[tuple[int, int, int]]] = {name: [] for name in extractors}
             for (x, y), yaw in zip(xy, yaws):
                 sim.teleport(float(x), float(y), float(yaw))
@@ -84,7 +96,7 @@ def main() -> None:
             for name, r in rows.items():
                 kps, found, good = np.array(r).T
                 print(
-                    f"k={k:g} {name}: {np.median(kps):.0f} | {np.median(found):.0f} | "
+                    f"{label} {name}: {np.median(kps):.0f} | {np.median(found):.0f} | "
                     f"{np.median(good):.0f}, {good.min()} | {1000 * pair_s[name]:.0f}",
                     flush=True,
                 )
