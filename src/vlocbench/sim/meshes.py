@@ -7,9 +7,11 @@ texture coordinates stay sharp at edges.
 
 from __future__ import annotations
 
+import functools
 import itertools
 import zlib
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -22,25 +24,53 @@ GROUND_BLOCK_M = 4.0
 
 @dataclass
 class MeshBuilder:
-    """Accumulates triangles: vertices (N, 3), texture coordinates (N, 2), faces (M, 3)."""
+    """Accumulates triangles: vertices (N, 3), texture coordinates (N, 2), faces (M, 3).
 
-    vertices: list[Array] = field(default_factory=list)
-    uvs: list[Array] = field(default_factory=list)
-    faces: list[NDArray[np.int64]] = field(default_factory=list)
-    count: int = 0
+    Quads are most of a town (about 140,000 in town01), so :meth:`quad` records them and
+    :meth:`arrays` makes them in one vectorized pass per subdivision, with the arithmetic of one
+    quad at a time (the same arrays to the bit) and in the order everything was added.
+    """
+
+    parts: list[tuple[int, int, Array, Array, NDArray[np.int64]]] = field(default_factory=list)
+    quads: dict[tuple[int, int], list[tuple[Any, ...]]] = field(default_factory=dict)
+    count: int = 0  # vertices so far
+    face_count: int = 0
 
     def add(self, vertices: Array, uvs: Array, faces: NDArray[np.int64]) -> None:
-        self.vertices.append(vertices)
-        self.uvs.append(uvs)
-        self.faces.append(faces + self.count)
+        self.parts.append((self.count, self.face_count, vertices, uvs, faces + self.count))
         self.count += len(vertices)
+        self.face_count += len(faces)
 
     def arrays(self) -> tuple[Array, Array, NDArray[np.int64]]:
-        return (
-            np.concatenate(self.vertices),
-            np.concatenate(self.uvs),
-            np.concatenate(self.faces),
-        )
+        vertices, uvs = np.empty((self.count, 3)), np.empty((self.count, 2))
+        faces = np.empty((self.face_count, 3), np.int64)
+        for first, first_face, v, uv, f in self.parts:
+            vertices[first : first + len(v)], uvs[first : first + len(v)] = v, uv
+            faces[first_face : first_face + len(f)] = f
+        for (nu, nv), records in self.quads.items():
+            origin, u, v, size_u, size_v, uv_origin, uv_per_m, starts, face_starts = (
+                np.array(c) for c in zip(*records)
+            )
+            # np.linspace(0, size, n + 1) of each quad, as linspace computes it
+            a = np.arange(nu + 1.0) * (size_u / nu)[:, None]
+            b = np.arange(nv + 1.0) * (size_v / nv)[:, None]
+            a[:, -1], b[:, -1] = size_u, size_v
+            aa = np.tile(a, (1, nv + 1))[..., None]  # (Q, P, 1): meshgrid "xy", raveled
+            bb = np.repeat(b, nu + 1, axis=1)[..., None]
+            rows = starts[:, None] + np.arange((nu + 1) * (nv + 1))
+            vertices[rows] = origin[:, None] + aa * u[:, None] + bb * v[:, None]
+            uvs[rows] = np.concatenate(
+                [
+                    uv_origin[:, None, :1] + aa * uv_per_m[:, None, :1],
+                    uv_origin[:, None, 1:] + bb * uv_per_m[:, None, 1:],
+                ],
+                axis=2,
+            )
+            template = _quad_faces(nu, nv)
+            faces[face_starts[:, None] + np.arange(len(template))] = (
+                template + starts[:, None, None]
+            )
+        return vertices, uvs, faces
 
     def __bool__(self) -> bool:
         return self.count > 0
@@ -63,18 +93,20 @@ class MeshBuilder:
         """
         nu = max(1, int(np.ceil(size_u / cell_m))) if cell_m > 0 else 1
         nv = max(1, int(np.ceil(size_v / cell_m))) if cell_m > 0 else 1
-        a = np.linspace(0.0, size_u, nu + 1)
-        b = np.linspace(0.0, size_v, nv + 1)
-        aa, bb = np.meshgrid(a, b, indexing="xy")  # (nv+1, nu+1)
-        verts = origin + aa.reshape(-1, 1) * u_axis + bb.reshape(-1, 1) * v_axis
-        uv = np.stack(
-            [uv_origin[0] + aa.ravel() * uv_per_m[0], uv_origin[1] + bb.ravel() * uv_per_m[1]], 1
+        record = (
+            np.asarray(origin, float),
+            np.asarray(u_axis, float),
+            np.asarray(v_axis, float),
+            float(size_u),
+            float(size_v),
+            tuple(map(float, uv_origin)),
+            tuple(map(float, uv_per_m)),
+            self.count,
+            self.face_count,
         )
-        idx = np.arange((nv + 1) * (nu + 1)).reshape(nv + 1, nu + 1)
-        p00, p10 = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel()
-        p01, p11 = idx[1:, :-1].ravel(), idx[1:, 1:].ravel()
-        faces = np.concatenate([np.stack([p00, p10, p11], 1), np.stack([p00, p11, p01], 1)])
-        self.add(verts, uv, faces)
+        self.quads.setdefault((nu, nv), []).append(record)
+        self.count += (nu + 1) * (nv + 1)
+        self.face_count += 2 * nu * nv
 
     def box(self, center: Array, half: Array, yaw_rad: float = 0.0, uv_per_m: float = 0.5) -> None:
         """A closed box (all six faces), rotated by ``yaw_rad`` about z."""
@@ -119,6 +151,17 @@ class MeshBuilder:
         verts = verts * (1 + rng.uniform(-0.12, 0.12, (len(verts), 1)))
         uv = np.stack([np.arctan2(verts[:, 1], verts[:, 0]), verts[:, 2]], 1) * 1.5
         self.add(center + verts * radii, uv, faces)
+
+
+@functools.cache
+def _quad_faces(nu: int, nv: int) -> NDArray[np.int64]:
+    """The triangles (2 nu nv, 3) of a quad's (nv + 1) x (nu + 1) grid of vertices, row-major."""
+    idx = np.arange((nv + 1) * (nu + 1)).reshape(nv + 1, nu + 1)
+    p00, p10 = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel()
+    p01, p11 = idx[1:, :-1].ravel(), idx[1:, 1:].ravel()
+    faces = np.concatenate([np.stack([p00, p10, p11], 1), np.stack([p00, p11, p01], 1)])
+    faces.flags.writeable = False
+    return faces
 
 
 def icosphere(subdiv: int) -> tuple[Array, NDArray[np.int64]]:
