@@ -440,7 +440,9 @@ class _SceneBuilder:
                 corner = origin + u * (j * bay_m) + up * z
                 whole = tile.window is not None and height == tile.height_m
                 relief = whole and low
-                self.facade_cell(material, tile, corner, u, bay_m, height, variant, cell, relief)
+                self.facade_cell(
+                    material, tile, corner, u, -normal, bay_m, height, variant, cell, relief
+                )
                 if whole:
                     set_back_m = tile.recess_m if relief else 0.0
                     self.lit_window(tile, corner, u, normal, bay_m, set_back_m, lit)
@@ -451,19 +453,20 @@ class _SceneBuilder:
         tile: tex.FacadeTile,
         corner: Array,
         u: Array,
+        inward: Array,
         bay_m: float,
         height_m: float,
         variant: int,
         cell_m: float,
         relief: bool,
     ) -> None:
-        """Atlas cell ``variant`` on the wall from ``corner`` (its bottom left) along ``u``. With
+        """Atlas cell ``variant`` on the wall from ``corner`` (its bottom left) along ``u``,
+        ``inward`` the wall's normal into the building (up x u). With
         ``relief``, a whole cell of a style with relief is the wall around its window, the window
         ``tile.recess_m`` behind it, and the four reveals between them (the window's edge texels
         drawn across the depth); the texture lands where a flat cell would put it. Only the
         cell-wide strips are cut into ``cell_m`` cells: the window's edges already cut the rest."""
         up = np.array([0.0, 0, 1])
-        inward = -np.cross(u, up)
         mesh = self.meshes[material]
         k = (1 / (tile.variants * bay_m), -1 / tile.height_m)  # texture per metre along u, up
         u0 = variant / tile.variants
