@@ -257,8 +257,9 @@ class LightGlueMatcher:
             "flash": False,
             "weights": None,  # else kornia looks for (or downloads) them; ours come from packages
         }
-        # no named features: the weights are loaded below (kornia's stub says str, it takes None)
-        net = KF.LightGlue(features=None, **conf)  # type: ignore[arg-type]
+        # no named features: the weights are loaded below (some kornia stubs say str; it takes None)
+        lightglue: Any = KF.LightGlue
+        net = lightglue(features=None, **conf)
         package, parts = _MATCHER_WEIGHTS[features]
         state = _load(_weights(package, *parts))
         # the released files name the layers the old way; LighterGlue's file also holds XFeat
