@@ -6,15 +6,16 @@
                                          [--viewpoint "8,37.5;13,40"]
 
 At ``--places`` places along the route (half-way between gallery images, as bench_illumination's
-queries), renders the gallery camera at each illumination level k and matches each query with
-the gallery image nearest to it in the ground plane: the true place, the retrieval left out
+queries), renders the gallery camera at each illumination level k and matches each query with the
+gallery image nearest to it in the ground plane: the true place, the retrieval left out
 (``--viewpoint``: the query camera raised by dz m and pitched down by the given degrees, at noon,
-instead of the light's levels). For each feature preset (one keypoint budget each) it prints, per level, the median keypoints and matches, the median and
-the least over the places of the matches that hloc's check with the known poses keeps (each
-keypoint within 4 px of the other's epipolar line, the maps' verification), and the matcher's
-median time per pair (the first place's pair at the first level, after a warm-up, over
-``--repeats``; learned stages run on one thread, as in a run's worker). Whether a budget limits
-what the local features find where the retrieval is right, and what it costs.
+instead of the light's levels). For each feature preset (one keypoint budget each) it prints, per
+level, the median keypoints and matches, the median and the least over the places of the matches
+that hloc's check with the known poses keeps (each keypoint within 4 px of the other's epipolar
+line, the maps' verification), and the matcher's median time per pair (the first place's pair at the
+first level, after a warm-up, over ``--repeats``; learned stages run on one thread, as in a run's
+worker). Whether a budget limits what the local features find where the retrieval is right, and what
+it costs.
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Mesh construction: recorded quads, and the blocks the ground textures are laid in (paving, grass)."""
+"""Mesh construction: recorded quads; the blocks of the ground textures (paving, grass)."""
 
 import numpy as np
 
