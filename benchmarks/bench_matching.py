@@ -47,14 +47,16 @@ def main() -> None:
         raise SystemExit(f"{args.matcher} is not a LightGlue-type matcher")
     print(f"{args.matcher} on {matcher.device}, keypoints {sorted({len(f) for f in feats})}")
 
+    own_width = matcher.net.conf.width_confidence  # the preset's pruning (LighterGlue: 0.95)
+
     def batched(size: int, prune: bool) -> Callable[[], object]:
         def run() -> object:
             matcher.batch_size = size
-            matcher.net.conf.width_confidence = 0.99 if prune else -1
+            matcher.net.conf.width_confidence = own_width if prune else -1
             try:
                 return matcher.match_many(pairs)
             finally:
-                matcher.net.conf.width_confidence = 0.99
+                matcher.net.conf.width_confidence = own_width
 
         return run
 
