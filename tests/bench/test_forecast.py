@@ -1,13 +1,14 @@
 """What a run would do, read from its store and the cache without making or writing anything."""
 
 import dataclasses
+import json
 import statistics
 
 import pytest
 import yaml
 
 from vlocbench.bench.experiment import load_experiment
-from vlocbench.bench.forecast import forecast
+from vlocbench.bench.forecast import MapBuild, forecast
 from vlocbench.bench.store import DB_FILE, StoreError, read_episodes
 from vlocbench.config import to_dict
 from vlocbench.sim.town import TownSpec
@@ -63,14 +64,23 @@ def test_a_town_without_stored_drives_is_timed_per_metre_and_a_new_cache_has_all
     for g in twin_groups:  # the same route's length: the same time as small's drives
         stored = [r.wall_s for r in rows if (r.method, r.kind) == (g.method, g.kind)]
         assert g.estimated and g.episode_s == pytest.approx(statistics.median(stored))
-    assert f.maps_to_build == (("small-twin", "sift"),)
+    # the twin's map, timed by small's: the same route, a gallery of about as many images (its
+    # capture not yet made, one image a spacing of the route, where small's drive stopped short)
+    small_map = json.loads(next((root / "cache" / "maps").glob("*/*/map.json")).read_text())
+    build_s = sum(small_map["report"]["seconds"].values())
+    assert f.maps_to_build == (MapBuild("small-twin", "sift", pytest.approx(build_s, rel=0.05)),)
+    assert f.map_worker_s == f.maps_to_build[0].worker_s
     assert f.galleries_to_make == ("small-twin",)
-    assert any(line.startswith("(times: ") for line in f.lines(1))
+    text = f.lines(2)
+    assert text[2].startswith("maps to build: small-twin sift (~")
+    assert text[-3].startswith("maps: ~") and text[-3].endswith(" on 2 worker(s)")
+    assert text[-1].startswith("(times: ") and "maps: the median rates" in text[-1]
 
     fresh = root / "fresh"
     new = forecast(load_experiment(_spec(root, output=str(fresh), cache=str(fresh / "cache"))))
     assert (new.to_run, new.worker_s, new.untimed) == (5, 0, 5)
-    assert new.galleries_to_make == ("small",) and new.maps_to_build == (("small", "sift"),)
+    assert new.galleries_to_make == ("small",)
+    assert new.maps_to_build == (MapBuild("small", "sift", None),) and new.map_worker_s == 0
     assert new.lines(2)[-1] == "all: 5 of 5 left, 5 with no time yet"
     assert not fresh.exists()
 

@@ -191,18 +191,33 @@ def test_a_map_build_killed_while_matching_keeps_the_pairs_it_matched(
 
     from vlocbench.loc import mapping
 
-    out = tmp_path / "map"
+    maps = tmp_path / "maps"  # two galleries' folders of one kind of map, as a cache lays them out
+    whole = build_map(gallery, method_conf("sift"), maps / "whole" / "m")
+    assert whole.done == {"features": len(gallery), "matching": whole.pairs}
+    assert whole.workers == 1
+    out = maps / "killed" / "m"
     child = [sys.executable, "-c", KILLED_MID_MATCHING, str(gallery.root), str(out)]
     assert subprocess.run(child, check=False).returncode == 137
     with h5py.File(out / "matches.h5", "r") as f:  # readable, with the two chunks before the kill
         assert len(f.keys()) == 8
     pairs = len((out / "pairs.txt").read_text().splitlines())
+    assert pairs == whole.pairs
+    # the time to build one like it is the finished one's; of the killed one, what it lacks
+    seconds = whole.seconds
+    assert mapping.build_seconds(maps, "m", len(gallery), None) == pytest.approx(
+        sum(seconds.values())
+    )
+    assert mapping.build_seconds(maps, "m", len(gallery), out) == pytest.approx(
+        seconds["global"] + seconds["triangulation"] + seconds["matching"] * (pairs - 8) / pairs
+    )
+    assert mapping.build_seconds(tmp_path / "no-maps", "m", len(gallery), out) is None
     matched = []
     real = mapping.match_pairs
     monkeypatch.setattr(mapping, "match_pairs", lambda m, p: matched.append(len(p)) or real(m, p))
     again = build_map(gallery, method_conf("sift"), out)
     assert sum(matched) == pairs - 8  # the rerun matched only what the kill left
-    assert again.points == build_map(gallery, method_conf("sift"), tmp_path / "whole").points
+    assert again.done == {"features": 0, "matching": pairs - 8}
+    assert again.points == whole.points
 
 
 def test_a_gallery_goes_to_colmap_and_back_unchanged(gallery, tmp_path):

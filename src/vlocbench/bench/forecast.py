@@ -1,8 +1,9 @@
 """What a run of an experiment would do, without doing it (``vlocbench run FILE --dry-run``): its
 episodes already in the store or in the stores it would reuse, those left to drive, the galleries
-and maps it would make, and the worker time the drives would take, estimated from the wall times
-of the finished episodes of the store and of those it would reuse. Reads the stores without their
-locks (a run may be writing), makes and writes nothing."""
+and maps it would make, and the worker time the maps and the drives would take, estimated from
+the cache's finished maps of the same kind and from the wall times of the finished episodes of
+the store and of those it would reuse. Reads the stores and caches without their locks (a run may
+be writing), makes and writes nothing."""
 
 from __future__ import annotations
 
@@ -16,6 +17,7 @@ from vlocbench.bench.experiment import EpisodeTask, ExperimentPlan
 from vlocbench.bench.preparation import cached_preparation
 from vlocbench.bench.store import DB_FILE, EpisodeRow, read_episodes
 from vlocbench.bench.towns import route_named, town_named
+from vlocbench.loc.mapping import build_seconds
 
 
 @dataclass(frozen=True)
@@ -37,6 +39,16 @@ class EpisodeGroup:
 
 
 @dataclass(frozen=True)
+class MapBuild:
+    """A map a run would build (or finish), and a worker's seconds for it (None: no finished map
+    of its kind in the cache to go by)."""
+
+    town: str
+    method: str
+    worker_s: float | None
+
+
+@dataclass(frozen=True)
 class Forecast:
     """What :func:`forecast` found."""
 
@@ -45,7 +57,8 @@ class Forecast:
     groups: tuple[EpisodeGroup, ...]
     reusable: int  # of the done, how many a run would copy from the ``reuse`` stores
     galleries_to_make: tuple[str, ...]  # towns
-    maps_to_build: tuple[tuple[str, str], ...]  # (town, method name)
+    maps_to_build: tuple[MapBuild, ...]
+    map_worker_s: float  # of the maps to build with a time to go by, each folder once
 
     @property
     def planned(self) -> int:
@@ -67,7 +80,7 @@ class Forecast:
 
     def lines(self, workers: int) -> list[str]:
         """The forecast as text: the counts, what to make, a line per method and kind with
-        episodes left, and the drives' time on ``workers`` workers."""
+        episodes left, and the maps' and the drives' time on ``workers`` workers."""
         out = [
             f"{self.experiment} ({self.output_dir}): {self.planned} episodes, "
             f"{self.planned - self.to_run} done"
@@ -77,24 +90,47 @@ class Forecast:
         if self.galleries_to_make:
             out.append(f"galleries to capture: {', '.join(self.galleries_to_make)}")
         if self.maps_to_build:
-            out.append("maps to build: " + ", ".join(f"{t} {m}" for t, m in self.maps_to_build))
+            out.append("maps to build: " + ", ".join(map(_build, self.maps_to_build)))
         by_kind: dict[tuple[str, str], list[EpisodeGroup]] = defaultdict(list)
         for g in self.groups:
             by_kind[(g.method, g.kind)].append(g)
         for (method, kind), groups in by_kind.items():
             if any(g.to_run for g in groups):
                 out.append(f"  {method} {kind}: {_left(groups)}")
+        if self.map_worker_s:
+            out.append(
+                f"maps: ~{_span(self.map_worker_s)} of a worker, "
+                f"~{_span(self.map_worker_s / workers)} on {workers} worker(s)"
+            )
         if self.to_run:
             wall = f", {_span(self.worker_s / workers)} on {workers} worker(s)"
             out.append(f"all: {_left(self.groups)}" + (wall if self.worker_s else ""))
-        if self.worker_s:
+        if self.worker_s or self.map_worker_s:
+            on_top = [
+                *(["the galleries"] if self.galleries_to_make else []),
+                *(
+                    ["the maps without a time"]
+                    if any(b.worker_s is None for b in self.maps_to_build)
+                    else []
+                ),
+            ]
             out.append(
                 "(times: the median wall time of the finished episodes of each town, method and "
                 "kind, as their workers drove them; ~: of the method's in other towns, per metre "
                 "of route"
-                + ("; the galleries and maps come on top)" if self.maps_to_build else ")")
+                + (
+                    "; maps: the median rates of the cache's finished maps of the same kind, per "
+                    "image and pair, less what their folders hold"
+                    if self.map_worker_s
+                    else ""
+                )
+                + (f"; {' and '.join(on_top)} come on top)" if on_top else ")")
             )
         return out
+
+
+def _build(b: MapBuild) -> str:
+    return f"{b.town} {b.method}" + (f" (~{_span(b.worker_s)})" if b.worker_s is not None else "")
 
 
 def _left(groups: Sequence[EpisodeGroup]) -> str:
@@ -126,6 +162,13 @@ def forecast(plan: ExperimentPlan, reuse: Sequence[str | Path] = ()) -> Forecast
     needed = {(t.town, t.method.name) for t in todo if t.method and t.method.needs_map}
     # as the store names them; once a town (its generation is cached for fewer towns than a set's)
     name = {t: town_named(t).name for t in plan.spec.towns}
+    maps_root = Path(plan.spec.cache).resolve() / "maps"
+    left = sorted((t, method) for t, method in needed if not maps[t, method].finished)
+    seconds = {  # one build a folder: methods that localize differently share a map
+        (t, m.name): build_seconds(maps_root, m.name, m.images, m.folder)
+        for m, t in ((maps[key], key[0]) for key in left)
+    }
+    builds = tuple(MapBuild(name[t], m, seconds[t, maps[t, m].name]) for t, m in left)
     return Forecast(
         experiment=plan.name,
         output_dir=plan.output_dir,
@@ -134,7 +177,8 @@ def forecast(plan: ExperimentPlan, reuse: Sequence[str | Path] = ()) -> Forecast
         galleries_to_make=tuple(
             name[t] for t in name if not galleries[t] and any(p[0] == t for p in needed)
         ),
-        maps_to_build=tuple(sorted((name[t], m) for t, m in needed if not maps[t, m])),
+        maps_to_build=builds,
+        map_worker_s=sum(s for s in seconds.values() if s is not None),
     )
 
 

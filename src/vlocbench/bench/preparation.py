@@ -8,6 +8,7 @@ import concurrent.futures as cf
 import logging
 import time
 from collections.abc import Callable, Collection
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -25,6 +26,7 @@ from vlocbench.loc.mapping import (
     MatchPool,
     build_map,
     default_map_dir,
+    map_name,
     pools_matching,
 )
 from vlocbench.locks import building
@@ -104,11 +106,21 @@ def prepare_maps(
         bars.close()
 
 
+@dataclass(frozen=True)
+class CachedMap:
+    """A method's map of a town as the cache holds it."""
+
+    finished: bool
+    name: str  # its folder's name, what builds it (methods that differ only in localizing share it)
+    folder: Path | None  # where it is (to be) built; None while its town's gallery is not captured
+    images: int  # its gallery's images, or one a spacing of the route before its capture
+
+
 def cached_preparation(
     plan: ExperimentPlan,
-) -> tuple[dict[str, bool], dict[tuple[str, str], bool]]:
-    """Whether the cache holds each town's gallery, and each (town, method name)'s finished map
-    (not where its town's gallery is missing); nothing is made."""
+) -> tuple[dict[str, bool], dict[tuple[str, str], CachedMap]]:
+    """Whether the cache holds each town's gallery, and each (town, method name)'s map; nothing
+    is made."""
     cache = Path(plan.spec.cache).resolve()
     galleries, maps = {}, {}
     for town in plan.spec.towns:
@@ -116,8 +128,12 @@ def cached_preparation(
         galleries[town] = (folder / GALLERY_FILE).exists()
         gallery = Gallery.load(folder) if galleries[town] else None
         for method in (m for m in plan.spec.methods if m.needs_map):
-            maps[(town, method.name)] = (
-                gallery is not None and (_map_dir(plan, cache, gallery, method) / MAP_FILE).exists()
+            where = _map_dir(plan, cache, gallery, method) if gallery else None
+            maps[(town, method.name)] = CachedMap(
+                finished=where is not None and (where / MAP_FILE).exists(),
+                name=map_name(method.conf, method.mapping or plan.spec.mapping),
+                folder=where,
+                images=len(gallery) if gallery else _shots(plan, town),
             )
     return galleries, maps
 
@@ -178,7 +194,7 @@ def _gallery(plan: ExperimentPlan, town_name: str, cache: Path, bars: StageBars)
             logger.info(f"{town.name}: capturing the gallery in {gallery_dir}")
             t = time.perf_counter()
             route = route_named(town_name, spec.route_length_m)
-            shots = int(route.length_m / spec.gallery.spacing_m) + 1
+            shots = _shots(plan, town_name)
             with Simulator(town, spec.gallery.conditions) as sim:
                 capture_gallery(
                     sim,
@@ -192,6 +208,13 @@ def _gallery(plan: ExperimentPlan, town_name: str, cache: Path, bars: StageBars)
             write_platform_file(gallery_dir)
             logger.info(f"{town.name}: gallery captured in {time.perf_counter() - t:.0f} s")
     return Gallery.load(gallery_dir)
+
+
+def _shots(plan: ExperimentPlan, town_name: str) -> int:
+    """The images of the town's gallery: one every ``gallery.spacing_m`` of its route (the
+    capture stops where the drive ends the route, at most this many)."""
+    route = route_named(town_name, plan.spec.route_length_m)
+    return int(route.length_m / plan.spec.gallery.spacing_m) + 1
 
 
 def _map(

@@ -8,8 +8,9 @@ missing (or with ``overwrite``):
     pairs.txt     mapping pairs: the top retrievals (default) or the nearest gallery poses
     matches.h5    matches per pair, filtered by the epipolar geometry of the known poses
     database.db, sfm/   the COLMAP database and model (pycolmap ``triangulate_points``)
-    map.json      method, gallery, statistics and stage times; written last, so a folder with it
-                  holds a finished map, which ``build_map`` returns as it is
+    map.json      method, gallery, statistics, stage times (what each did, on how many workers);
+                  written last, so a folder with it holds a finished map, which ``build_map``
+                  returns as it is
 
 One process builds a map folder at a time (:func:`vlocbench.locks.building`); another that asks for
 the same map waits, then finds it finished. A map is keyed by (gallery, what builds it: the
@@ -98,7 +99,11 @@ class MapReport:
     points: int
     mean_track_length: float
     mean_reprojection_error_px: float
-    seconds: dict[str, float] = field(default_factory=dict)
+    seconds: dict[str, float] = field(default_factory=dict)  # wall time per stage of this build
+    # what this build's timed stages did (a resumed build does the rest): images whose features it
+    # extracted ("features"), pairs it matched ("matching")
+    done: dict[str, int] = field(default_factory=dict)
+    workers: int = 1  # processes that extracted and matched (a pool's, else this one)
 
 
 def map_name(conf: MethodConf, mapping: MappingConfig) -> str:
@@ -114,6 +119,64 @@ def default_map_dir(
 ) -> Path:
     """``root/GALLERY-ID/FEATURES-HASH``: one folder per (gallery, map configuration)."""
     return Path(root) / gallery.identity / map_name(conf, mapping)
+
+
+def build_seconds(
+    maps_root: str | Path, name: str, images: int, folder: Path | None
+) -> float | None:
+    """A worker's seconds to build a map ``name`` (:func:`map_name`) of a gallery of ``images``
+    images, from the finished maps of that name in ``maps_root`` (as :func:`default_map_dir` lays
+    them out): their median seconds a worker per image extracted, per pair matched (and pairs per
+    image), and per image for the rest (global descriptors, triangulation). What ``folder`` (the
+    map's own, unfinished) already holds is not counted again. None: no finished map to go by.
+    Reads its caches without the build's lock (a build may be writing them)."""
+    rates: dict[str, list[float]] = {}
+    for path in sorted(Path(maps_root).glob(f"*/{name}/{MAP_FILE}")):
+        for key, rate in _build_rates(path).items():
+            rates.setdefault(key, []).append(rate)
+    if len(rates) < 4:
+        return None
+    extract, match, pairs_per_image, rest = (
+        float(np.median(rates[k])) for k in ("features", "matching", "pairs", "rest")
+    )
+    listed = folder / "pairs.txt" if folder else None  # written once the pairs are chosen
+    pairs = (
+        len(listed.read_text().splitlines())
+        if listed and listed.is_file()
+        else round(images * pairs_per_image)
+    )
+    extracted = _entries(folder / "features.h5") if folder else 0
+    matched = _entries(folder / "matches.h5") if folder else 0
+    return extract * max(images - extracted, 0) + match * max(pairs - matched, 0) + rest * images
+
+
+def _build_rates(path: Path) -> dict[str, float]:
+    """A finished map's seconds a worker per unit of each stage (``features``: an image extracted,
+    ``matching``: a pair matched, ``rest``: an image), and its ``pairs`` per image. A map whose
+    report predates ``done`` counts the whole gallery and pairs as done, on one worker."""
+    try:
+        report = json.loads(path.read_text())["report"]
+        seconds, images, pairs = report["seconds"], report["images"], report["pairs"]
+    except (OSError, ValueError, KeyError):
+        return {}
+    done = report.get("done") or {"features": images, "matching": pairs}
+    workers = report.get("workers", 1)
+    rates = {"pairs": pairs / images} if images else {}
+    for stage in ("features", "matching"):
+        if done.get(stage):
+            rates[stage] = seconds[stage] * workers / done[stage]
+    if images:
+        rates["rest"] = (seconds.get("global", 0.0) + seconds.get("triangulation", 0.0)) / images
+    return rates
+
+
+def _entries(path: Path) -> int:
+    """Entries of an HDF5 cache that a build may be writing (0: none, or unreadable now)."""
+    try:
+        with h5py.File(path, "r", locking=False) as f:
+            return len(f.keys())
+    except OSError:
+        return 0
 
 
 # -- HDF5 caches ---------------------------------------------------------------------------------
@@ -249,10 +312,10 @@ def _extract(
     overwrite: bool,
     progress: Progress | None,
     pool: MatchPool | None = None,
-) -> None:
+) -> int:
     """Each gallery image's features into ``store``, ``EXTRACT_CHUNK`` images a job: here, or in
     ``pool``'s processes (a learned extractor runs on one thread in any process: the same
-    features)."""
+    features); returns how many images it extracted (those the store lacked)."""
     try:
         done = set() if overwrite else store.names()
     except LocalizationError:  # left unreadable by a killed build: extract again
@@ -260,7 +323,7 @@ def _extract(
         done = set()
     todo = [n for n in gallery.names if n not in done]
     if not todo:
-        return
+        return 0
     chunks = [todo[start : start + EXTRACT_CHUNK] for start in range(0, len(todo), EXTRACT_CHUNK)]
     extractor = build_features(conf.features) if pool is None else None
     jobs = ((conf.features, gallery, chunk, extractor) for chunk in chunks)
@@ -275,6 +338,7 @@ def _extract(
                     progress("features", count, len(todo))
 
     store.write(items())
+    return len(todo)
 
 
 def _global(
@@ -396,10 +460,10 @@ def _match(
     path: Path,
     progress: Progress | None,
     pool: MatchPool | None = None,
-) -> dict[tuple[str, str], np.ndarray]:
+) -> tuple[dict[tuple[str, str], np.ndarray], int]:
     """Matches of each pair that agree with the known poses, cached in ``path`` a chunk of
     ``MATCH_CHUNK`` pairs at a time (a batched matcher gets a chunk at once): here, or in
-    ``pool``'s processes."""
+    ``pool``'s processes; and how many pairs it matched (those the cache lacked)."""
     with _writable_cache(path) as f, features.reading() as read:
         todo = [(a, b) for a, b in pairs if _pair_key(a, b) not in f]
         chunks = [todo[start : start + MATCH_CHUNK] for start in range(0, len(todo), MATCH_CHUNK)]
@@ -426,7 +490,7 @@ def _match(
             if progress:
                 done = len(pairs) - len(todo) + k * MATCH_CHUNK + len(chunk)
                 progress("matches", done, len(pairs))
-        return {(a, b): f[_pair_key(a, b)][()] for a, b in pairs}
+        return {(a, b): f[_pair_key(a, b)][()] for a, b in pairs}, len(todo)
 
 
 def posed_model(gallery: Gallery) -> pycolmap.Reconstruction:
@@ -618,7 +682,7 @@ def _build(
     seconds = {}
     t = time.perf_counter()
     features = FeatureStore(out / "features.h5")
-    _extract(gallery, conf, features, overwrite, progress, pool)
+    done = {"features": _extract(gallery, conf, features, overwrite, progress, pool)}
     seconds["features"] = time.perf_counter() - t
     t = time.perf_counter()
     descriptors = _global(gallery, conf, out, features, overwrite)
@@ -628,7 +692,9 @@ def _build(
     (out / "pairs.txt").write_text("".join(f"{a} {b}\n" for a, b in pairs))
     if overwrite:
         (out / "matches.h5").unlink(missing_ok=True)
-    matches = _match(gallery, conf, mapping, features, pairs, out / "matches.h5", progress, pool)
+    matches, done["matching"] = _match(
+        gallery, conf, mapping, features, pairs, out / "matches.h5", progress, pool
+    )
     seconds["matching"] = time.perf_counter() - t
     t = time.perf_counter()
     rec = _triangulate(gallery, mapping, features, matches, out)
@@ -645,6 +711,8 @@ def _build(
         mean_track_length=float(rec.compute_mean_track_length()) if rec.num_points3D() else 0.0,
         mean_reprojection_error_px=float(rec.compute_mean_reprojection_error()),
         seconds=seconds,
+        done=done,
+        workers=pool.workers if pool else 1,
     )
     info = {
         "version": 1,
