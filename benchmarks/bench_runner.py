@@ -23,6 +23,7 @@ import argparse
 import os
 import shutil
 import statistics
+import sys
 from pathlib import Path
 
 import cv2
@@ -54,8 +55,11 @@ def main() -> None:
     )
     args = ap.parse_args()
     experiment = {**EXPERIMENT, "gallery": {"camera": {"antialias": args.antialias}}}
-    if args.one_thread:  # before torch and the renderer start, which read these then
-        os.environ.update(WORKER_THREADS_ENV)
+    if args.one_thread:
+        if any(os.environ.get(k) != v for k, v in WORKER_THREADS_ENV.items()):
+            # numpy's OpenBLAS took its threads as numpy loaded: start again as a pool worker does
+            env = {**os.environ, **WORKER_THREADS_ENV}
+            os.execve(sys.executable, [sys.executable, *sys.argv], env)
         cv2.setNumThreads(1)
     plan = load_experiment(
         {**experiment, "output": str(args.out / "warmup"), "cache": str(args.out / "cache")}

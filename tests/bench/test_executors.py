@@ -91,6 +91,26 @@ def _alive(pids):
     return alive
 
 
+def _environment_at_start(_: int) -> dict[str, str]:
+    """This process's environment as it was given at its start (Linux), before any module ran."""
+    raw = Path("/proc/self/environ").read_bytes().decode(errors="replace")
+    return dict(entry.split("=", 1) for entry in raw.split("\0") if "=" in entry)
+
+
+def test_pool_workers_start_with_one_thread_each_and_the_driver_keeps_its_own(monkeypatch):
+    # numpy's OpenBLAS reads its threads as numpy loads, before the pool's initializer runs
+    from vlocbench.bench.executors import worker_pool
+    from vlocbench.bench.worker import WORKER_THREADS_ENV
+
+    monkeypatch.setenv("OPENBLAS_NUM_THREADS", "7")
+    monkeypatch.delenv("LP_NUM_THREADS", raising=False)
+    with worker_pool(2) as pool:
+        started = list(pool.map(_environment_at_start, range(4)))
+    for env in started:
+        assert {k: env.get(k) for k in WORKER_THREADS_ENV} == WORKER_THREADS_ENV
+    assert os.environ["OPENBLAS_NUM_THREADS"] == "7" and "LP_NUM_THREADS" not in os.environ
+
+
 @pytest.mark.parametrize("how", [signal.SIGKILL, signal.SIGTERM, signal.SIGINT])
 def test_a_killed_or_interrupted_run_leaves_no_process_and_a_consistent_store(
     tmp_path, control, how

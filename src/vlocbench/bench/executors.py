@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import concurrent.futures as cf
 import logging
-import multiprocessing
 import os
 import time
 import traceback
@@ -29,6 +28,7 @@ from vlocbench.bench.towns import town_named
 from vlocbench.bench.worker import (
     EpisodeOutcome,
     Job,
+    WorkerContext,
     jobs_of,
     run_job,
     worker_init,
@@ -179,7 +179,7 @@ def _run_inline(jobs: list[Job], runner: Runner, record: Recorder) -> None:
 def local_pool(workers: int) -> cf.ProcessPoolExecutor:
     return cf.ProcessPoolExecutor(
         workers,
-        mp_context=multiprocessing.get_context("spawn"),
+        mp_context=WorkerContext(),
         initializer=worker_init,
         initargs=(os.getpid(),),
     )

@@ -7,6 +7,7 @@ dies)."""
 
 from __future__ import annotations
 
+import multiprocessing.context
 import os
 import signal
 import threading
@@ -179,9 +180,40 @@ def _failed(task: EpisodeTask, exc: Exception, wall_s: float) -> EpisodeOutcome:
     return EpisodeOutcome(task.key, None, wall_s, "".join(traceback.format_exception(exc, limit=8)))
 
 
-# a pool worker's thread pools: one thread each (OpenMP for torch, MKL, Mesa's llvmpipe renderer),
-# since the pool already puts one worker on each core
-WORKER_THREADS_ENV = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "LP_NUM_THREADS": "1"}
+# a pool worker's thread pools: one thread each (OpenMP for torch, OpenBLAS for numpy, MKL, Mesa's
+# llvmpipe renderer), since the pool already puts one worker on each core
+WORKER_THREADS_ENV = {
+    "OMP_NUM_THREADS": "1",
+    "OPENBLAS_NUM_THREADS": "1",
+    "MKL_NUM_THREADS": "1",
+    "LP_NUM_THREADS": "1",
+}
+
+
+class _WorkerProcess(multiprocessing.context.SpawnProcess):
+    """A pool process that starts with :data:`WORKER_THREADS_ENV` in its environment: numpy's
+    OpenBLAS reads it when numpy loads, before any initializer runs (unpickling the initializer
+    loads it), and its threads spinning against the other workers' made a query's retrieval and
+    matching 7x slower with 2 workers on 2 cores (``benchmarks/bench_runner.py``)."""
+
+    def start(self) -> None:
+        # the child copies the environment as it starts; the driver's own is restored at once
+        saved = {k: os.environ.get(k) for k in WORKER_THREADS_ENV}
+        os.environ.update(WORKER_THREADS_ENV)
+        try:
+            super().start()
+        finally:
+            for k, v in saved.items():
+                if v is None:
+                    del os.environ[k]
+                else:
+                    os.environ[k] = v
+
+
+class WorkerContext(multiprocessing.context.SpawnContext):
+    """The spawn start method, with each process's thread pools limited from its start."""
+
+    Process = _WorkerProcess
 
 
 def default_workers() -> int:
@@ -190,9 +222,7 @@ def default_workers() -> int:
 
 
 def worker_init(driver_pid: int) -> None:
-    # threads of a worker spinning against the other workers' make every one crawl; set before
-    # torch and the renderer start (with the first episode), which read them then
-    os.environ.update(WORKER_THREADS_ENV)
+    # OpenCV takes its threads from a call, not the environment (WorkerContext sets the others)
     import cv2
 
     cv2.setNumThreads(1)
