@@ -164,10 +164,11 @@ def forecast(plan: ExperimentPlan, reuse: Sequence[str | Path] = ()) -> Forecast
     name = {t: town_named(t).name for t in plan.spec.towns}
     maps_root = Path(plan.spec.cache).resolve() / "maps"
     left = sorted((t, method) for t, method in needed if not maps[t, method].finished)
-    seconds = {  # one build a folder: methods that localize differently share a map
-        (t, m.name): build_seconds(maps_root, m.name, m.images, m.folder)
-        for m, t in ((maps[key], key[0]) for key in left)
-    }
+    seconds: dict[tuple[str, str], float | None] = {}  # a build a folder, shared by methods
+    for t, method in left:  # that differ only in how they localize
+        m = maps[t, method]
+        if (t, m.name) not in seconds:
+            seconds[t, m.name] = build_seconds(maps_root, m.name, m.images, m.folder)
     builds = tuple(MapBuild(name[t], m, seconds[t, maps[t, m].name]) for t, m in left)
     return Forecast(
         experiment=plan.name,
