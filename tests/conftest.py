@@ -42,11 +42,22 @@ def small_town():
 
 
 @pytest.fixture(scope="session")
-def small_sim(small_town):
+def _shared_sim(small_town):
     from vlocbench.sim import Simulator
 
     with Simulator(small_town) as sim:
         yield sim
+
+
+@pytest.fixture
+def small_sim(_shared_sim):
+    """The session's simulator of the small town, by day with the default car: the tests that
+    share it change its conditions and car, and the order they run in varies (``-n 2``)."""
+    from vlocbench.sim import Conditions, VehicleParams
+
+    _shared_sim.set_conditions(Conditions())
+    _shared_sim.set_vehicle(VehicleParams())
+    return _shared_sim
 
 
 # -- a short real gallery of the small town (320x240), captured once per test session --------

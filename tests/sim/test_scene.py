@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from vlocbench.sim import Conditions, generate_town, load_town_spec
+from vlocbench.sim import generate_town, load_town_spec
 from vlocbench.sim.scene import (
     GROUND_FLOOR_M,
     building_side,
@@ -16,7 +16,6 @@ from vlocbench.sim.textures import WINDOW_RECESS_M
 def test_windows_sit_behind_the_walls_face(small_town, small_sim):
     """Seen head-on from 2 m, a masonry wall's depth has two levels: its face and, 0.2 m
     further, its windows."""
-    small_sim.set_conditions(Conditions())  # by day: the shared simulator may be left at night
     fh = small_town.spec.buildings.floor_height_m
     depths = []
     for b in small_town.buildings:
