@@ -43,7 +43,7 @@ def query(small_sim, stretch):
     """A camera image between two gallery images, with the true vehicle pose."""
     x, y = (stretch.xy[10] + stretch.xy[11]) / 2
     small_sim.teleport(float(x), float(y), float(stretch.yaw_rad[10]) + 0.02)
-    frame = small_sim.render([CAMERA])[0]
+    frame = small_sim.render([CAMERA], frame_id=0)[0]  # not the shared simulator's clock
     return frame.image, frame.world_from_cam @ np.linalg.inv(CAMERA.extrinsics.vehicle_from_cam())
 
 
