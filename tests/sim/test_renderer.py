@@ -235,7 +235,6 @@ def test_projection_matches_the_render(small_sim):
         Intrinsics(640, 480, 75.0),
         Extrinsics(x_m=1.0, y_m=0.2, z_m=1.8, roll_deg=3, pitch_deg=5, yaw_deg=10),
     )
-    small_sim.set_conditions(Conditions())
     wp = small_sim.town.route.waypoints_xy[5]
     world_from_vehicle = planar_pose(
         float(wp[0]), float(wp[1]), float(small_sim.town.route.yaw_rad[5])
@@ -354,7 +353,6 @@ def test_an_aliased_camera_sees_the_same_scene_with_harder_edges(small_sim):
 def test_depth_is_the_distance_along_the_optical_axis_to_the_scene(small_sim):
     """Looking straight down on the road from 12 m: every road pixel is 12 m away along the
     axis, and the sky straight up is at the far plane."""
-    small_sim.set_conditions(Conditions())
     wp = small_sim.town.route.waypoints_xy[5]
     down = np.eye(4)
     down[:3, :3] = np.diag([1.0, -1.0, -1.0])  # optical axis -z (down), image y along -y
