@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import random
 import subprocess
 import sys
 import tempfile
@@ -23,6 +24,26 @@ from vlocbench.bench.runner import run_experiment
 from vlocbench.config import to_dict
 from vlocbench.sim.camera import Camera, Extrinsics, Intrinsics
 from vlocbench.sim.town import RouteSpec, TownSpec, generate_town
+
+
+def pytest_addoption(parser: pytest.Parser) -> None:
+    parser.addoption(
+        "--test-order",
+        default="file",
+        help="file (as collected), reverse, or shuffle:SEED: run the tests in another order, to "
+        "find a test that passes only after another (shared fixtures hold state)",
+    )
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    order = config.getoption("--test-order")
+    if order == "reverse":
+        items.reverse()
+    elif order.startswith("shuffle:") and order.removeprefix("shuffle:").isdigit():
+        # every xdist worker collects with the same seed, so they agree on the order
+        random.Random(int(order.removeprefix("shuffle:"))).shuffle(items)
+    elif order != "file":
+        raise pytest.UsageError(f"--test-order: {order!r}; valid: file, reverse, shuffle:SEED")
 
 
 def small_spec(seed: int = 3) -> TownSpec:
