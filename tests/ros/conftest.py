@@ -1,11 +1,14 @@
-"""ROS 2 fixtures: a private domain per test worker, discovery on loopback only, logs in tmp."""
+"""ROS 2 fixtures: a private domain per test process, discovery on loopback only, logs in tmp."""
 
 from __future__ import annotations
 
+import fcntl
 import os
 import subprocess
 import sys
+import tempfile
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -13,17 +16,31 @@ import pytest
 rclpy = pytest.importorskip("rclpy")
 
 
-def domain_id(worker_id: str) -> int:
-    """A ROS domain of this test worker's own (pytest-xdist runs workers in parallel)."""
-    return 60 + (int(worker_id[2:]) if worker_id.startswith("gw") else 20)
+ROS_DOMAINS = range(30, 102)  # ROS 2's portable range is 0-101; 0, the default, stays free
+
+
+@pytest.fixture(scope="session")
+def ros_domain() -> Iterator[int]:
+    """A ROS domain that no other test process on this machine holds while this one runs: nodes of
+    one domain hear each other, and two runs at once (pytest -n 2's workers, or another
+    checkout's tests) otherwise answer each other's queries."""
+    for domain in ROS_DOMAINS:
+        with open(Path(tempfile.gettempdir()) / f"vlocbench-ros-domain-{domain}.lock", "w") as lock:
+            try:
+                fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                continue
+            yield domain  # held until the session ends and the file closes
+            return
+    pytest.fail(f"every ROS domain of {ROS_DOMAINS} is held by another test process")
 
 
 @pytest.fixture
-def ros_env(monkeypatch, tmp_path, worker_id):
+def ros_env(monkeypatch, tmp_path, ros_domain):
     monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     monkeypatch.setenv("ROS_LOG_DIR", str(tmp_path / "ros-log"))
-    monkeypatch.setenv("ROS_DOMAIN_ID", str(domain_id(worker_id)))
-    return {"ROS_DOMAIN_ID": str(domain_id(worker_id))}
+    monkeypatch.setenv("ROS_DOMAIN_ID", str(ros_domain))
+    return {"ROS_DOMAIN_ID": str(ros_domain)}
 
 
 @pytest.fixture
