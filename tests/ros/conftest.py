@@ -19,13 +19,18 @@ rclpy = pytest.importorskip("rclpy")
 ROS_DOMAINS = range(30, 102)  # ROS 2's portable range is 0-101; 0, the default, stays free
 
 
+def domain_lock(domain: int) -> Path:
+    """The file whose exclusive lock holds ``domain`` for one test process."""
+    return Path(tempfile.gettempdir()) / f"vlocbench-ros-domain-{domain}.lock"
+
+
 @pytest.fixture(scope="session")
 def ros_domain() -> Iterator[int]:
     """A ROS domain that no other test process on this machine holds while this one runs: nodes of
     one domain hear each other, and two runs at once (pytest -n 2's workers, or another
     checkout's tests) otherwise answer each other's queries."""
     for domain in ROS_DOMAINS:
-        with open(Path(tempfile.gettempdir()) / f"vlocbench-ros-domain-{domain}.lock", "w") as lock:
+        with open(domain_lock(domain), "w") as lock:
             try:
                 fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
             except BlockingIOError:
