@@ -35,15 +35,21 @@ def pytest_addoption(parser: pytest.Parser) -> None:
     )
 
 
+def pytest_configure(config: pytest.Config) -> None:
+    # checked before collection, so a typo stops the run at once rather than after the imports
+    order = config.getoption("--test-order")
+    seed = order.removeprefix("shuffle:")
+    if order not in ("file", "reverse") and not (order.startswith("shuffle:") and seed.isdigit()):
+        raise pytest.UsageError(f"--test-order: {order!r}; valid: file, reverse, shuffle:SEED")
+
+
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     order = config.getoption("--test-order")
     if order == "reverse":
         items.reverse()
-    elif order.startswith("shuffle:") and order.removeprefix("shuffle:").isdigit():
+    elif order.startswith("shuffle:"):
         # every xdist worker collects with the same seed, so they agree on the order
         random.Random(int(order.removeprefix("shuffle:"))).shuffle(items)
-    elif order != "file":
-        raise pytest.UsageError(f"--test-order: {order!r}; valid: file, reverse, shuffle:SEED")
 
 
 def small_spec(seed: int = 3) -> TownSpec:
@@ -187,7 +193,12 @@ def assert_stops_cleanly(proc, stop: int, code: int) -> str:
     """Send ``stop`` to the subprocess ``proc`` (stderr piped, text): it exits with ``code`` and
     prints no native stack trace (glog's failure handler). Returns its stderr."""
     proc.send_signal(stop)
-    _, err = proc.communicate(timeout=60)  # reads its pipes to the end and closes them
+    try:
+        _, err = proc.communicate(timeout=60)  # reads its pipes to the end and closes them
+    except subprocess.TimeoutExpired:
+        proc.kill()  # not left running after the test (it would hold its ROS domain or store)
+        _, err = proc.communicate()
+        pytest.fail(f"still running 60 s after signal {stop}, killed; its stderr:\n{err}")
     assert proc.returncode == code, err
     assert "Aborted" not in err and "stack trace" not in err, err
     return err
